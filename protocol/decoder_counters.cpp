@@ -1,0 +1,26 @@
+#include "protocol/decoder_counters.hpp"
+
+#include <nlohmann/json.hpp>
+
+namespace imubridge::protocol {
+
+DecoderCounters& DecoderCounters::operator+=(const DecoderCounters& other) {
+  bytes_in += other.bytes_in;
+  frames_out += other.frames_out;
+  crc_failures += other.crc_failures;
+  resyncs += other.resyncs;
+  bytes_discarded += other.bytes_discarded;
+  sequence_gaps += other.sequence_gaps;
+  frames_lost += other.frames_lost;
+  unsupported += other.unsupported;
+  return *this;
+}
+
+void to_json(nlohmann::json& j, const DecoderCounters& c) {
+  j = nlohmann::json{{"bytes_in", c.bytes_in},           {"frames_out", c.frames_out},
+                     {"crc_failures", c.crc_failures},   {"resyncs", c.resyncs},
+                     {"bytes_discarded", c.bytes_discarded}, {"sequence_gaps", c.sequence_gaps},
+                     {"frames_lost", c.frames_lost},     {"unsupported", c.unsupported}};
+}
+
+}  // namespace imubridge::protocol
