@@ -1,0 +1,400 @@
+#include "store/store.hpp"
+
+#include <sqlite3.h>
+
+#include <cstdio>
+#include <string>
+
+#include "store/schema.hpp"
+
+namespace imubridge::store {
+namespace {
+
+using RawCounts = decltype(protocol::Sample::raw);
+// Raw counts travel as one BLOB of little-endian int32s: one bind per sample instead of ten.
+constexpr std::size_t kRawBytes = 4 * std::tuple_size_v<RawCounts>;
+
+std::array<std::uint8_t, kRawBytes> encode_raw(const RawCounts& raw) {
+  std::array<std::uint8_t, kRawBytes> bytes{};
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    const auto value = static_cast<std::uint32_t>(raw[i]);
+    for (std::size_t b = 0; b < 4; ++b) bytes[4 * i + b] = static_cast<std::uint8_t>(value >> (8 * b));
+  }
+  return bytes;
+}
+
+RawCounts decode_raw(std::span<const std::uint8_t> bytes) {
+  RawCounts raw{};
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    std::uint32_t value = 0;
+    for (std::size_t b = 0; b < 4; ++b) value |= std::uint32_t{bytes[4 * i + b]} << (8 * b);
+    raw[i] = static_cast<std::int32_t>(value);
+  }
+  return raw;
+}
+
+template <std::size_t N>
+void bind_reals(Statement& statement, int first, const std::array<double, N>& values) {
+  for (std::size_t i = 0; i < N; ++i) statement.bind_real(first + static_cast<int>(i), values[i]);
+}
+
+void bind_nulls(Statement& statement, int first, int count) {
+  for (int i = 0; i < count; ++i) statement.bind_null(first + i);
+}
+
+template <std::size_t N>
+std::array<double, N> column_reals(const Statement& row, int first) {
+  std::array<double, N> values{};
+  for (std::size_t i = 0; i < N; ++i) values[i] = row.column_real(first + static_cast<int>(i));
+  return values;
+}
+
+// A group of columns (mag xyz, reference velocity) is absent when all are NULL; a lone NULL in it is a NaN.
+template <std::size_t N>
+std::optional<std::array<double, N>> column_optional_reals(const Statement& row, int first) {
+  for (int i = 0; i < static_cast<int>(N); ++i) {
+    if (!row.is_null(first + i)) return column_reals<N>(row, first);
+  }
+  return std::nullopt;
+}
+
+std::optional<std::int64_t> column_optional_int(const Statement& row, int column) {
+  if (row.is_null(column)) return std::nullopt;
+  return row.column_int(column);
+}
+
+// Sequence numbers are unsigned 64-bit, SQLite integers signed: the bits are stored as they are.
+std::int64_t seq_to_column(std::uint64_t seq) { return static_cast<std::int64_t>(seq); }
+std::uint64_t seq_from_column(std::int64_t value) { return static_cast<std::uint64_t>(value); }
+
+Statement& bind_optional_int(Statement& statement, int index, std::optional<std::int64_t> value) {
+  return value ? statement.bind_int(index, *value) : statement.bind_null(index);
+}
+
+Database open_database(const std::filesystem::path& path, bool read_only) {
+  Database db(path, read_only);
+  open_schema(db, read_only);
+  db.exec("PRAGMA foreign_keys = ON");
+  if (!read_only) {
+    // WAL: readers (replay, export) never block the recorder. NORMAL: a commit costs no fsync; WAL still keeps the
+    // file consistent through a crash, and an application crash loses nothing committed.
+    Statement journal(db, "PRAGMA journal_mode = WAL");
+    if (!journal.step() || journal.column_text(0) != "wal") throw StoreError(db.name() + ": cannot use WAL mode");
+    db.exec("PRAGMA synchronous = NORMAL");
+  }
+  return db;
+}
+
+}  // namespace
+
+Store::Store(const std::filesystem::path& path, Options options)
+    : db_(open_database(path, options.read_only)), options_(options) {}
+
+Store::~Store() {
+  try {
+    commit();
+  } catch (const StoreError& e) {
+    std::fprintf(stderr, "imubridge store: %s\n", e.what());
+  }
+}
+
+void Store::write(Statement& write, std::string_view what) {
+  try {
+    if (!db_.in_transaction()) begin_.step();
+    write.step();
+  } catch (const StoreError& e) {
+    fail(e, what);
+  }
+  ++pending_rows_;
+  if (pending_rows_ >= options_.max_batch_rows) commit();
+}
+
+std::int64_t Store::insert_committed(Statement& insert, std::string_view what) {
+  write(insert, what);
+  const std::int64_t id = db_.last_insert_id();
+  commit();
+  return id;
+}
+
+void Store::fail(const StoreError& error, std::string_view what) {
+  std::string message = std::string(error.what()) + " (" + std::string(what) + ")";
+  // A constraint failure undoes only the offending statement: the batch is still good and stays open.
+  if (error.sqlite_code() == SQLITE_CONSTRAINT && db_.in_transaction()) throw StoreError(message, error.sqlite_code());
+  db_.rollback();
+  if (pending_rows_ > 0) {
+    message += "; rolled back the " + std::to_string(pending_rows_) +
+               " rows appended since the last commit, earlier data is intact";
+  }
+  pending_rows_ = 0;
+  throw StoreError(message, error.sqlite_code());
+}
+
+bool Store::commit_if_due(std::chrono::steady_clock::time_point now) {
+  if (!db_.in_transaction()) return false;  // not pending_rows_: a rejected first row leaves an empty batch open
+  if (last_due_commit_ && now - *last_due_commit_ < options_.commit_interval) return false;
+  commit();
+  last_due_commit_ = now;
+  return true;
+}
+
+void Store::commit() {
+  if (!db_.in_transaction()) return;
+  try {
+    commit_.step();
+  } catch (const StoreError& e) {
+    fail(e, "committing");
+  }
+  pending_rows_ = 0;
+}
+
+std::int64_t Store::begin_session(const SessionInfo& info) {
+  insert_session_.bind_text(1, info.kind)
+      .bind_text(2, info.source)
+      .bind_int(3, info.started_wall_ns)
+      .bind_text(4, info.config)
+      .bind_text(5, info.software_version);
+  return insert_committed(insert_session_, "starting a session");
+}
+
+void Store::end_session(std::int64_t session, std::int64_t ended_wall_ns) {
+  end_session_.bind_int(1, session).bind_int(2, ended_wall_ns);
+  write(end_session_, "ending a session");
+  commit();  // leaves changes() alone: it counts the UPDATE's rows
+  if (db_.changes() == 0) throw StoreError(db_.name() + ": no session " + std::to_string(session) + " to end");
+}
+
+std::int64_t Store::add_link(std::int64_t session, std::string_view name, std::string_view protocol,
+                             std::string_view device) {
+  insert_link_.bind_int(1, session).bind_text(2, name).bind_text(3, protocol).bind_text(4, device);
+  return insert_committed(insert_link_, "adding a link");
+}
+
+void Store::append_chunk(std::int64_t session, std::int64_t link, Direction direction, std::int64_t recv_mono_ns,
+                         std::int64_t recv_wall_ns, std::span<const std::uint8_t> bytes) {
+  insert_chunk_.bind_int(1, session)
+      .bind_int(2, link)
+      .bind_text(3, direction == Direction::tx ? "tx" : "rx")
+      .bind_int(4, recv_mono_ns)
+      .bind_int(5, recv_wall_ns)
+      .bind_blob(6, bytes);
+  write(insert_chunk_, "appending a chunk");
+}
+
+void Store::append_sample(std::int64_t session, const protocol::Sample& sample) {
+  insert_sample_.bind_int(1, session)
+      .bind_int(2, sample.link_id)
+      .bind_int(3, seq_to_column(sample.seq))
+      .bind_int(4, sample.device_time_us)
+      .bind_int(5, sample.recv_mono_ns);
+  bind_reals(insert_sample_, 6, sample.accel);
+  bind_reals(insert_sample_, 9, sample.gyro);
+  if (sample.has_mag) {
+    bind_reals(insert_sample_, 12, sample.mag);
+  } else {
+    bind_nulls(insert_sample_, 12, 3);
+  }
+  if (sample.has_temperature) {
+    insert_sample_.bind_real(15, sample.temperature_c);
+  } else {
+    insert_sample_.bind_null(15);
+  }
+  const auto raw = encode_raw(sample.raw);  // bound without a copy: lives until write() has stepped
+  if (sample.has_raw) {
+    insert_sample_.bind_blob(16, raw);
+  } else {
+    insert_sample_.bind_null(16);
+  }
+  write(insert_sample_, "appending a sample");
+}
+
+void Store::append_event(std::int64_t session, const Event& event) {
+  insert_event_.bind_int(1, session);
+  bind_optional_int(insert_event_, 2, event.link_id)
+      .bind_int(3, event.mono_ns)
+      .bind_int(4, event.wall_ns)
+      .bind_text(5, event.kind)
+      .bind_int(6, event.count)
+      .bind_text(7, event.detail);
+  write(insert_event_, "appending an event");
+}
+
+std::int64_t Store::begin_run(std::int64_t session, const RunInfo& info) {
+  insert_run_.bind_int(1, session)
+      .bind_text(2, info.kind)
+      .bind_text(3, info.params_json)
+      .bind_int(4, info.created_wall_ns)
+      .bind_text(5, info.software_version);
+  return insert_committed(insert_run_, "starting a run");
+}
+
+void Store::append_estimate(std::int64_t run, const Estimate& e) {
+  insert_estimate_.bind_int(1, run).bind_int(2, e.link_id).bind_int(3, seq_to_column(e.seq));
+  bind_reals(insert_estimate_, 4, std::array{e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy});
+  write(insert_estimate_, "appending an estimate");
+}
+
+void Store::append_reference(std::int64_t session, const ReferenceRow& row) {
+  insert_reference_.bind_int(1, session).bind_int(2, row.t_ns);
+  bind_reals(insert_reference_, 3, row.position);
+  bind_reals(insert_reference_, 6, row.quat_wxyz);
+  if (row.velocity) {
+    bind_reals(insert_reference_, 10, *row.velocity);
+  } else {
+    bind_nulls(insert_reference_, 10, 3);
+  }
+  write(insert_reference_, "appending a reference row");
+}
+
+std::vector<Session> Store::sessions() const {
+  Statement query(db_,
+                  "SELECT id, kind, source, config, started_wall_ns, software_version, ended_wall_ns "
+                  "FROM sessions ORDER BY id");
+  std::vector<Session> sessions;
+  while (query.step()) {
+    sessions.push_back({.id = query.column_int(0),
+                        .info = {.kind = query.column_text(1),
+                                 .source = query.column_text(2),
+                                 .config = query.column_text(3),
+                                 .started_wall_ns = query.column_int(4),
+                                 .software_version = query.column_text(5)},
+                        .ended_wall_ns = column_optional_int(query, 6)});
+  }
+  return sessions;
+}
+
+std::vector<Link> Store::links(std::int64_t session) const {
+  Statement query(db_, "SELECT id, name, protocol, device FROM links WHERE session_id = ?1 ORDER BY id");
+  query.bind_int(1, session);
+  std::vector<Link> links;
+  while (query.step()) {
+    links.push_back({.id = query.column_int(0),
+                     .session_id = session,
+                     .name = query.column_text(1),
+                     .protocol = query.column_text(2),
+                     .device = query.column_text(3)});
+  }
+  return links;
+}
+
+std::vector<Run> Store::runs(std::int64_t session) const {
+  Statement query(db_,
+                  "SELECT id, kind, params, created_wall_ns, software_version FROM runs "
+                  "WHERE session_id = ?1 ORDER BY id");
+  query.bind_int(1, session);
+  std::vector<Run> runs;
+  while (query.step()) {
+    runs.push_back({.id = query.column_int(0),
+                    .session_id = session,
+                    .info = {.kind = query.column_text(1),
+                             .params_json = query.column_text(2),
+                             .created_wall_ns = query.column_int(3),
+                             .software_version = query.column_text(4)}});
+  }
+  return runs;
+}
+
+std::vector<Event> Store::events(std::int64_t session) const {
+  Statement query(db_,
+                  "SELECT link_id, mono_ns, wall_ns, kind, count, detail FROM events "
+                  "WHERE session_id = ?1 ORDER BY id");
+  query.bind_int(1, session);
+  std::vector<Event> events;
+  while (query.step()) {
+    events.push_back({.link_id = column_optional_int(query, 0),
+                      .mono_ns = query.column_int(1),
+                      .wall_ns = query.column_int(2),
+                      .kind = query.column_text(3),
+                      .count = query.column_int(4),
+                      .detail = query.column_text(5)});
+  }
+  return events;
+}
+
+void Store::for_each_chunk(std::int64_t session, std::optional<std::int64_t> link,
+                           const std::function<void(const Chunk&)>& visit) const {
+  Statement query(db_,
+                  "SELECT link_id, direction, recv_mono_ns, recv_wall_ns, bytes FROM chunks "
+                  "WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
+  query.bind_int(1, session);
+  bind_optional_int(query, 2, link);
+  Chunk chunk;  // one buffer for the whole session
+  while (query.step()) {
+    const auto bytes = query.column_blob(4);
+    chunk.link_id = query.column_int(0);
+    chunk.direction = query.column_text(1) == "tx" ? Direction::tx : Direction::rx;
+    chunk.recv_mono_ns = query.column_int(2);
+    chunk.recv_wall_ns = query.column_int(3);
+    chunk.bytes.assign(bytes.begin(), bytes.end());
+    visit(chunk);
+  }
+}
+
+void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
+                            const std::function<void(const protocol::Sample&)>& visit) const {
+  Statement query(db_,
+                  "SELECT link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, gz, mx, my, mz, "
+                  "temperature_c, raw FROM samples WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
+  query.bind_int(1, session);
+  bind_optional_int(query, 2, link);
+  while (query.step()) {
+    protocol::Sample sample;
+    sample.link_id = static_cast<std::uint32_t>(query.column_int(0));
+    sample.seq = seq_from_column(query.column_int(1));
+    sample.device_time_us = query.column_int(2);
+    sample.recv_mono_ns = query.column_int(3);
+    sample.accel = column_reals<3>(query, 4);
+    sample.gyro = column_reals<3>(query, 7);
+    if (const auto mag = column_optional_reals<3>(query, 10)) {
+      sample.mag = *mag;
+      sample.has_mag = true;
+    }
+    if (const auto temperature = column_optional_reals<1>(query, 13)) {
+      sample.temperature_c = (*temperature)[0];
+      sample.has_temperature = true;
+    }
+    if (!query.is_null(14)) {
+      const auto raw = query.column_blob(14);
+      if (raw.size() != kRawBytes) {
+        throw StoreError(db_.name() + ": a sample of session " + std::to_string(session) + " has " +
+                         std::to_string(raw.size()) + " bytes of raw counts, not " + std::to_string(kRawBytes));
+      }
+      sample.raw = decode_raw(raw);
+      sample.has_raw = true;
+    }
+    visit(sample);
+  }
+}
+
+void Store::for_each_estimate(std::int64_t run, const std::function<void(const Estimate&)>& visit) const {
+  Statement query(db_,
+                  "SELECT link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy FROM estimates "
+                  "WHERE run_id = ?1 ORDER BY id");
+  query.bind_int(1, run);
+  while (query.step()) {
+    const auto [t_s, fx, fy, vx, vy, var_vx, var_vy] = column_reals<7>(query, 2);
+    visit({.link_id = query.column_int(0),
+           .seq = seq_from_column(query.column_int(1)),
+           .t_s = t_s,
+           .fx = fx,
+           .fy = fy,
+           .vx = vx,
+           .vy = vy,
+           .var_vx = var_vx,
+           .var_vy = var_vy});
+  }
+}
+
+void Store::for_each_reference(std::int64_t session, const std::function<void(const ReferenceRow&)>& visit) const {
+  Statement query(db_,
+                  "SELECT t_ns, px, py, pz, qw, qx, qy, qz, vx, vy, vz FROM reference "
+                  "WHERE session_id = ?1 ORDER BY id");
+  query.bind_int(1, session);
+  while (query.step()) {
+    visit({.t_ns = query.column_int(0),
+           .position = column_reals<3>(query, 1),
+           .quat_wxyz = column_reals<4>(query, 4),
+           .velocity = column_optional_reals<3>(query, 8)});
+  }
+}
+
+}  // namespace imubridge::store

@@ -1,0 +1,607 @@
+#include "store/store.hpp"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sqlite3.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <list>
+#include <string>
+#include <vector>
+
+#include "store/schema.hpp"
+
+namespace imubridge::store {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kDenormal = std::numeric_limits<double>::denorm_min();
+
+std::uint64_t bits(double value) { return std::bit_cast<std::uint64_t>(value); }
+
+// Bit-exact comparison (so -0.0 differs from 0.0), except that any NaN equals any NaN: SQLite keeps no NaN payload.
+::testing::AssertionResult same_bits(double expected, double actual) {
+  if (bits(expected) == bits(actual) || (std::isnan(expected) && std::isnan(actual))) {
+    return ::testing::AssertionSuccess();
+  }
+  return ::testing::AssertionFailure() << std::hexfloat << expected << " came back as " << actual;
+}
+
+template <std::size_t N>
+void expect_same_bits(const std::array<double, N>& expected, const std::array<double, N>& actual) {
+  for (std::size_t i = 0; i < N; ++i) EXPECT_TRUE(same_bits(expected[i], actual[i])) << "element " << i;
+}
+
+void expect_same_sample(const protocol::Sample& expected, const protocol::Sample& actual) {
+  EXPECT_EQ(expected.link_id, actual.link_id);
+  EXPECT_EQ(expected.seq, actual.seq);
+  EXPECT_EQ(expected.device_time_us, actual.device_time_us);
+  EXPECT_EQ(expected.recv_mono_ns, actual.recv_mono_ns);
+  expect_same_bits(expected.accel, actual.accel);
+  expect_same_bits(expected.gyro, actual.gyro);
+  ASSERT_EQ(expected.has_mag, actual.has_mag);
+  if (expected.has_mag) {
+    expect_same_bits(expected.mag, actual.mag);
+  }
+  ASSERT_EQ(expected.has_temperature, actual.has_temperature);
+  if (expected.has_temperature) {
+    EXPECT_TRUE(same_bits(expected.temperature_c, actual.temperature_c));
+  }
+  ASSERT_EQ(expected.has_raw, actual.has_raw);
+  if (expected.has_raw) {
+    EXPECT_EQ(expected.raw, actual.raw);
+  }
+}
+
+protocol::Sample sample(std::uint32_t link, std::uint64_t seq) {
+  protocol::Sample s;
+  s.link_id = link;
+  s.seq = seq;
+  s.device_time_us = 1000 * static_cast<std::int64_t>(seq);
+  s.recv_mono_ns = 5'000'000 + 1'000'000 * static_cast<std::int64_t>(seq);
+  s.accel = {0.1 * static_cast<double>(seq), -0.2, -9.80665};
+  s.gyro = {0.01, 0.02, -0.03};
+  return s;
+}
+
+std::vector<char> file_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Queries the file through a connection of its own, independent of the Store under test.
+std::string query(const fs::path& path, const char* sql) {
+  sqlite3* db = nullptr;
+  std::string result = "(cannot open)";
+  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK) {
+    sqlite3_stmt* stmt = nullptr;
+    sqlite3_prepare_v2(db, sql, -1, &stmt, nullptr);
+    const int rc = sqlite3_step(stmt);
+    result = rc == SQLITE_ROW ? reinterpret_cast<const char*>(sqlite3_column_text(stmt, 0)) : sqlite3_errmsg(db);
+    sqlite3_finalize(stmt);
+  }
+  sqlite3_close(db);
+  return result;
+}
+
+void execute(const fs::path& path, const char* sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  EXPECT_EQ(sqlite3_exec(db, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  sqlite3_close(db);
+}
+
+std::vector<protocol::Sample> samples_of(const Store& store, std::int64_t session) {
+  std::vector<protocol::Sample> samples;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { samples.push_back(s); });
+  return samples;
+}
+
+// The message of the StoreError `action` throws, or "" if it throws none.
+template <class Action>
+std::string error_of(Action&& action) {
+  try {
+    action();
+  } catch (const StoreError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+class StoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string pattern = ::testing::TempDir() + "imubridge-store-XXXXXX";
+    ASSERT_NE(mkdtemp(pattern.data()), nullptr);
+    dir_ = pattern;
+    path_ = dir_ / "flight.db";
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  fs::path dir_;
+  fs::path path_;
+};
+
+const SessionInfo kLive{.kind = "live",
+                        .source = "/dev/ttyUSB0 @ 921600 baud",
+                        .config = R"({"links":[{"name":"imu0"}]})",
+                        .started_wall_ns = 1'700'000'000'000'000'000};
+
+TEST_F(StoreTest, SessionsLinksRunsAndEventsRoundTrip) {
+  SessionInfo sim{.kind = "sim", .source = "sim seed 7", .config = "", .started_wall_ns = 42};
+  sim.software_version = "0.0.9";
+  std::int64_t live = 0, imu = 0, radio = 0, run = 0;
+  std::vector<Event> events;
+  {
+    Store store(path_);
+    live = store.begin_session(kLive);
+    imu = store.add_link(live, "imu0", "imubridge", "/dev/ttyUSB0, FTDI A50285BI");
+    radio = store.add_link(live, "radio", "xbee", "/dev/ttyUSB1");
+    store.end_session(live, kLive.started_wall_ns + 60'000'000'000);
+    store.begin_session(sim);
+    run = store.begin_run(live, {.kind = "replay", .params_json = R"({"mu":0.3})", .created_wall_ns = 99});
+    events = {{.link_id = std::nullopt, .mono_ns = 10, .wall_ns = 20, .kind = "note", .count = 1, .detail = "takeoff"},
+              {.link_id = radio, .mono_ns = 11, .wall_ns = 21, .kind = "crc_failure", .count = 3, .detail = ""}};
+    for (const Event& event : events) store.append_event(live, event);
+  }
+  Store store(path_, {.read_only = true});
+  const std::vector<Session> sessions = store.sessions();
+  ASSERT_EQ(sessions.size(), 2u);
+  EXPECT_EQ(sessions[0], (Session{live, kLive, kLive.started_wall_ns + 60'000'000'000}));
+  EXPECT_EQ(sessions[0].info.software_version, IMUBRIDGE_VERSION);
+  EXPECT_EQ(sessions[1].info, sim);
+  EXPECT_EQ(sessions[1].ended_wall_ns, std::nullopt);
+  EXPECT_EQ(store.links(live), (std::vector<Link>{{imu, live, "imu0", "imubridge", "/dev/ttyUSB0, FTDI A50285BI"},
+                                                  {radio, live, "radio", "xbee", "/dev/ttyUSB1"}}));
+  EXPECT_TRUE(store.links(sessions[1].id).empty());
+  EXPECT_EQ(store.runs(live),
+            (std::vector<store::Run>{{run, live, {"replay", R"({"mu":0.3})", 99, IMUBRIDGE_VERSION}}}));
+  EXPECT_EQ(store.events(live), events);
+}
+
+TEST_F(StoreTest, ChunksComeBackByteExactInOrderPerSessionAndPerLink) {
+  std::vector<std::uint8_t> every_byte(256);
+  for (std::size_t i = 0; i < every_byte.size(); ++i) every_byte[i] = static_cast<std::uint8_t>(i);
+  std::vector<Chunk> written;
+  std::int64_t session = 0, imu = 0, radio = 0;
+  {
+    Store store(path_);
+    const std::int64_t other_session = store.begin_session(kLive);
+    const std::int64_t other_link = store.add_link(other_session, "imu0", "imubridge", "");
+    session = store.begin_session(kLive);
+    imu = store.add_link(session, "imu0", "imubridge", "");
+    radio = store.add_link(session, "radio", "xbee", "");
+    written = {{imu, Direction::rx, 100, 1000, every_byte},
+               {radio, Direction::tx, 101, 1001, {0x7E, 0x00}},
+               {imu, Direction::rx, 102, 1002, {}},  // an empty read is kept: its time is still an observation
+               {imu, Direction::rx, 102, 1002, {0x00}},
+               {radio, Direction::rx, 99, 999, {0xFF, 0xFE}}};  // stored order wins over timestamps
+    for (const Chunk& c : written) {
+      store.append_chunk(session, c.link_id, c.direction, c.recv_mono_ns, c.recv_wall_ns, c.bytes);
+      store.append_chunk(other_session, other_link, Direction::rx, 0, 0, std::vector<std::uint8_t>{1, 2, 3});
+    }
+  }
+  Store store(path_, {.read_only = true});
+  std::vector<Chunk> all, imu_only;
+  store.for_each_chunk(session, std::nullopt, [&](const Chunk& c) { all.push_back(c); });
+  store.for_each_chunk(session, imu, [&](const Chunk& c) { imu_only.push_back(c); });
+  EXPECT_EQ(all, written);
+  EXPECT_EQ(imu_only, (std::vector<Chunk>{written[0], written[2], written[3]}));
+}
+
+TEST_F(StoreTest, SamplesRoundTripBitExact) {
+  std::vector<protocol::Sample> written;
+  protocol::Sample plain = sample(0, 0);  // SI values only, as MAVLink HIGHRES_IMU gives them
+  written.push_back(plain);
+  protocol::Sample full = sample(0, std::numeric_limits<std::uint64_t>::max());  // beyond SQLite's signed range
+  full.accel = {-0.0, kDenormal, 1.0 / 3.0};
+  full.gyro = {kInf, -kInf, -1e-300};
+  full.mag = {-0.0, 21.5, -43.25};
+  full.has_mag = true;
+  full.temperature_c = -0.0;
+  full.has_temperature = true;
+  constexpr std::int32_t kLowest = std::numeric_limits<std::int32_t>::min();
+  constexpr std::int32_t kHighest = std::numeric_limits<std::int32_t>::max();
+  full.raw = {0, -1, kLowest, kHighest, 1, -2, 3, -4, 5, 0x12345678};
+  full.has_raw = true;
+  written.push_back(full);
+  protocol::Sample broken = sample(0, 2);  // a NaN must not lose the row, nor turn into 0
+  broken.accel[1] = kNaN;
+  broken.mag = {kNaN, 1.0, 2.0};
+  broken.has_mag = true;
+  written.push_back(broken);
+
+  std::int64_t session = 0;
+  {
+    Store store(path_);
+    session = store.begin_session(kLive);
+    for (auto& s : written) s.link_id = static_cast<std::uint32_t>(store.add_link(session, "imu", "imubridge", ""));
+    for (const auto& s : written) store.append_sample(session, s);
+  }
+  const auto read = samples_of(Store(path_, {.read_only = true}), session);
+  ASSERT_EQ(read.size(), written.size());
+  for (std::size_t i = 0; i < read.size(); ++i) {
+    SCOPED_TRACE(i);
+    expect_same_sample(written[i], read[i]);
+  }
+  std::vector<protocol::Sample> one_link;
+  Store(path_, {.read_only = true}).for_each_sample(session, written[1].link_id, [&](const protocol::Sample& s) {
+    one_link.push_back(s);
+  });
+  ASSERT_EQ(one_link.size(), 1u);
+  EXPECT_EQ(one_link[0].seq, written[1].seq);
+}
+
+std::array<double, 7> values(const Estimate& e) { return {e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy}; }
+
+TEST_F(StoreTest, EstimatesAndReferenceRoundTripBitExact) {
+  const std::vector<double> awkward = {-0.0, kDenormal, 1.0 / 3.0, -kInf, 6.02214076e23, kNaN, 0.1 + 0.2};
+  std::vector<Estimate> estimates;
+  for (std::size_t i = 0; i < awkward.size(); ++i) {
+    const auto at = [&](std::size_t k) { return awkward[(i + k) % awkward.size()]; };
+    estimates.push_back({0, 1000 + i, at(0), at(1), at(2), at(3), at(4), at(5), at(6)});
+  }
+  const std::vector<ReferenceRow> reference = {
+      {.t_ns = 0, .position = {1.0, -0.0, -2.5}, .quat_wxyz = {1, 0, 0, 0}, .velocity = std::nullopt},
+      {.t_ns = 5'000'000,
+       .position = {1.1, 0.1, -2.5},
+       .quat_wxyz = {0.5, -0.5, 0.5, -0.5},
+       .velocity = {{0.1, -0.0, kNaN}}}};
+  std::int64_t session = 0, run = 0, other_run = 0;
+  {
+    Store store(path_);
+    session = store.begin_session(kLive);
+    const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+    run = store.begin_run(session, {.kind = "live"});
+    other_run = store.begin_run(session, {.kind = "replay"});
+    for (auto& e : estimates) {
+      e.link_id = link;
+      store.append_estimate(run, e);
+      store.append_estimate(other_run, {.link_id = link, .seq = 7});
+    }
+    for (const auto& row : reference) store.append_reference(session, row);
+  }
+  Store store(path_, {.read_only = true});
+  std::vector<Estimate> read;
+  store.for_each_estimate(run, [&](const Estimate& e) { read.push_back(e); });
+  ASSERT_EQ(read.size(), estimates.size());
+  for (std::size_t i = 0; i < read.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(read[i].link_id, estimates[i].link_id);
+    EXPECT_EQ(read[i].seq, estimates[i].seq);
+    expect_same_bits(values(estimates[i]), values(read[i]));
+  }
+  std::vector<ReferenceRow> rows;
+  store.for_each_reference(session, [&](const ReferenceRow& row) { rows.push_back(row); });
+  ASSERT_EQ(rows.size(), reference.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(rows[i].t_ns, reference[i].t_ns);
+    expect_same_bits(reference[i].position, rows[i].position);
+    expect_same_bits(reference[i].quat_wxyz, rows[i].quat_wxyz);
+    ASSERT_EQ(rows[i].velocity.has_value(), reference[i].velocity.has_value());
+    if (rows[i].velocity) {
+      expect_same_bits(*reference[i].velocity, *rows[i].velocity);
+    }
+  }
+}
+
+// How many samples a separate reader sees, i.e. how many are committed.
+std::string committed_samples(const fs::path& path) { return query(path, "SELECT count(*) FROM samples"); }
+
+TEST_F(StoreTest, CommitIfDueWaitsForTheIntervalSinceItsLastCommit) {
+  Store store(path_, {.commit_interval = 200ms});
+  const std::int64_t session = store.begin_session(kLive);
+  const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+  const auto t0 = std::chrono::steady_clock::time_point{} + 1h;
+
+  EXPECT_FALSE(store.commit_if_due(t0)) << "nothing pending";
+  store.append_sample(session, sample(link, 0));
+  EXPECT_EQ(committed_samples(path_), "0");
+  EXPECT_TRUE(store.commit_if_due(t0)) << "the first call has no previous commit to wait for";
+  EXPECT_EQ(committed_samples(path_), "1");
+
+  store.append_sample(session, sample(link, 1));
+  EXPECT_FALSE(store.commit_if_due(t0 + 199ms));
+  EXPECT_EQ(store.pending_rows(), 1u);
+  EXPECT_EQ(committed_samples(path_), "1");
+  EXPECT_TRUE(store.commit_if_due(t0 + 200ms));
+  EXPECT_EQ(store.pending_rows(), 0u);
+  EXPECT_EQ(committed_samples(path_), "2");
+
+  EXPECT_FALSE(store.commit_if_due(t0 + 10s)) << "nothing pending";
+  store.append_sample(session, sample(link, 2));
+  EXPECT_TRUE(store.commit_if_due(t0 + 10s)) << "an idle spell is longer than the interval";
+  EXPECT_EQ(committed_samples(path_), "3");
+}
+
+TEST_F(StoreTest, BatchLimitExplicitCommitAndDestructionCommit) {
+  {
+    Store store(path_, {.commit_interval = 1h, .max_batch_rows = 3});
+    const std::int64_t session = store.begin_session(kLive);  // committed at once, with its link
+    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    EXPECT_EQ(query(path_, "SELECT count(*) FROM links"), "1");
+    store.append_sample(session, sample(link, 0));
+    store.append_sample(session, sample(link, 1));
+    EXPECT_EQ(committed_samples(path_), "0");
+    store.append_sample(session, sample(link, 2));
+    EXPECT_EQ(committed_samples(path_), "3") << "the third row fills the batch";
+    store.append_sample(session, sample(link, 3));
+    store.commit();
+    EXPECT_EQ(committed_samples(path_), "4");
+    store.append_sample(session, sample(link, 4));
+    EXPECT_EQ(committed_samples(path_), "4");
+  }
+  EXPECT_EQ(committed_samples(path_), "5") << "destruction commits";
+}
+
+TEST_F(StoreTest, RejectedRowThrowsAndLeavesTheBatchAlone) {
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+  const std::int64_t other = store.begin_session(kLive);
+  const std::int64_t run = store.begin_run(session, {.kind = "live"});
+  store.append_sample(session, sample(link, 0));
+
+  const std::string unknown_link = error_of([&] { store.append_sample(session, sample(link + 100, 1)); });
+  EXPECT_EQ(unknown_link, path_.string() + ": FOREIGN KEY constraint failed (appending a sample)");
+  EXPECT_NE(error_of([&] { store.append_sample(other, sample(link, 1)); }), "") << "link of another session";
+  EXPECT_NE(error_of([&] { store.append_chunk(session, link + 1, Direction::rx, 0, 0, {}); }), "");
+  EXPECT_NE(error_of([&] { store.append_event(other + 1, {}); }), "") << "unknown session";
+  EXPECT_NE(error_of([&] { store.append_estimate(run + 1, {.link_id = link}); }), "") << "unknown run";
+  EXPECT_NE(error_of([&] { store.add_link(other + 1, "imu", "imubridge", ""); }), "");
+
+  EXPECT_EQ(store.pending_rows(), 1u);
+  store.append_sample(session, sample(link, 2));
+  EXPECT_EQ(error_of([&] { store.end_session(other + 1, 0); }),
+            path_.string() + ": no session " + std::to_string(other + 1) + " to end");
+  const auto samples = samples_of(store, session);
+  ASSERT_EQ(samples.size(), 2u);
+  EXPECT_EQ(samples[0].seq, 0u);
+  EXPECT_EQ(samples[1].seq, 2u);
+}
+
+TEST_F(StoreTest, MalformedRawCountsAreAnErrorNotACrash) {
+  std::int64_t session = 0;
+  {
+    Store store(path_);
+    session = store.begin_session(kLive);
+    protocol::Sample s = sample(static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", "")), 0);
+    s.has_raw = true;
+    store.append_sample(session, s);
+  }
+  execute(path_, "UPDATE samples SET raw = x'0102'");  // as a hand-edited or foreign file might have it
+  EXPECT_EQ(error_of([&] { samples_of(Store(path_, {.read_only = true}), session); }),
+            path_.string() + ": a sample of session 1 has 2 bytes of raw counts, not 40");
+}
+
+TEST_F(StoreTest, KilledWriterLosesNothingCommitted) {
+  constexpr int kCommitted = 500;
+  // More than SQLite's 2 MB page cache holds, so part of the open batch has spilled into the WAL when it dies.
+  constexpr int kUncommitted = 30000;
+  const pid_t child = fork();
+  ASSERT_NE(child, -1);
+  if (child == 0) {  // the child only writes, then dies without unwinding; the parent checks
+    try {
+      Store store(path_, {.commit_interval = 1h});
+      const std::int64_t session = store.begin_session(kLive);
+      const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+      for (int i = 0; i < kCommitted + kUncommitted; ++i) {
+        if (i == kCommitted) store.commit();
+        store.append_sample(session, sample(link, static_cast<std::uint64_t>(i)));
+      }
+      raise(SIGKILL);
+    } catch (...) {
+    }
+    _exit(1);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << "the writer failed before being killed";
+  ASSERT_GT(fs::file_size(path_.string() + "-wal"), 1u << 20) << "the open batch should have reached the WAL";
+
+  EXPECT_EQ(query(path_, "PRAGMA integrity_check"), "ok");
+  Store store(path_);  // a restarted recorder, then a reader of what survived
+  const std::vector<Session> sessions = store.sessions();
+  ASSERT_EQ(sessions.size(), 1u);
+  const auto samples = samples_of(store, sessions[0].id);
+  ASSERT_EQ(samples.size(), static_cast<std::size_t>(kCommitted));
+  for (int i = 0; i < kCommitted; ++i) ASSERT_EQ(samples[i].seq, static_cast<std::uint64_t>(i));
+}
+
+// A full disk, as SQLite meets it: a VFS that forwards to the default one, except that while `full` is set every
+// write fails with SQLITE_FULL, which is what the unix VFS reports when write() fails with ENOSPC.
+class FullDisk {
+ public:
+  FullDisk() : base_(sqlite3_vfs_find(nullptr)), vfs_(*base_) {
+    vfs_.zName = "full-disk";
+    vfs_.pAppData = base_;
+    vfs_.xOpen = &FullDisk::open;
+    sqlite3_vfs_register(&vfs_, 1);
+  }
+  ~FullDisk() {
+    sqlite3_vfs_unregister(&vfs_);
+    sqlite3_vfs_register(base_, 1);
+    full = false;
+  }
+  static inline bool full = false;
+
+ private:
+  // The unix VFS gives database files and journals different methods: each gets a copy with xWrite replaced.
+  struct Patched {
+    sqlite3_io_methods methods;  // first, so a file's pMethods leads back to its Patched
+    const sqlite3_io_methods* original;
+  };
+  static inline std::list<Patched> patched_;
+
+  static int open(sqlite3_vfs* vfs, const char* name, sqlite3_file* file, int flags, int* out_flags) {
+    auto* base = static_cast<sqlite3_vfs*>(vfs->pAppData);
+    const int rc = base->xOpen(base, name, file, flags, out_flags);
+    if (rc != SQLITE_OK || file->pMethods == nullptr) return rc;
+    auto it =
+        std::find_if(patched_.begin(), patched_.end(), [&](const Patched& p) { return p.original == file->pMethods; });
+    if (it == patched_.end()) {
+      it = patched_.insert(patched_.end(), {*file->pMethods, file->pMethods});
+      it->methods.xWrite = &FullDisk::write;
+    }
+    file->pMethods = &it->methods;
+    return rc;
+  }
+  static int write(sqlite3_file* file, const void* data, int amount, sqlite3_int64 offset) {
+    const auto* patched = reinterpret_cast<const Patched*>(file->pMethods);
+    return full ? SQLITE_FULL : patched->original->xWrite(file, data, amount, offset);
+  }
+
+  sqlite3_vfs* base_;
+  sqlite3_vfs vfs_;
+};
+
+TEST_F(StoreTest, FullDiskAtCommitLosesOnlyTheBatchAndSaysSo) {
+  FullDisk disk;
+  {
+    Store store(path_, {.commit_interval = 1h});
+    const std::int64_t session = store.begin_session(kLive);
+    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    for (std::uint64_t seq = 0; seq < 10; ++seq) store.append_sample(session, sample(link, seq));
+    store.commit();
+    for (std::uint64_t seq = 10; seq < 35; ++seq) store.append_sample(session, sample(link, seq));
+
+    FullDisk::full = true;
+    try {
+      store.commit();
+      ADD_FAILURE() << "commit on a full disk succeeded";
+    } catch (const StoreError& e) {
+      EXPECT_EQ(e.sqlite_code(), SQLITE_FULL);
+      EXPECT_EQ(std::string(e.what()), path_.string() +
+                                           ": database or disk is full (committing); rolled back the 25 rows "
+                                           "appended since the last commit, earlier data is intact");
+    }
+    EXPECT_EQ(store.pending_rows(), 0u);
+    FullDisk::full = false;
+    store.append_sample(session, sample(link, 100));  // space came back: recording goes on
+  }
+  EXPECT_EQ(query(path_, "PRAGMA integrity_check"), "ok");
+  Store store(path_, {.read_only = true});
+  std::vector<std::uint64_t> seqs;
+  for (const auto& s : samples_of(store, store.sessions().at(0).id)) seqs.push_back(s.seq);
+  EXPECT_EQ(seqs, (std::vector<std::uint64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 100}));
+}
+
+TEST_F(StoreTest, ReadOnlyStoreNeverChangesTheFile) {
+  std::int64_t session = 0;
+  {
+    Store store(path_);
+    session = store.begin_session(kLive);
+    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    store.append_sample(session, sample(link, 0));
+    store.append_chunk(session, link, Direction::rx, 1, 2, std::vector<std::uint8_t>{1, 2});
+  }
+  const std::vector<char> before = file_bytes(path_);
+  {
+    Store store(path_, {.read_only = true});
+    EXPECT_EQ(samples_of(store, session).size(), 1u);
+    const std::string refused = error_of([&] { store.append_sample(session, sample(1, 1)); });
+    EXPECT_EQ(refused, path_.string() + ": attempt to write a readonly database (appending a sample)");
+    EXPECT_NE(error_of([&] { store.begin_session(kLive); }), "");
+    EXPECT_NE(error_of([&] { store.end_session(session, 3); }), "");
+  }
+  EXPECT_EQ(file_bytes(path_), before);
+  // SQLite's WAL index may appear beside it for readers; the log itself must stay empty.
+  const fs::path wal = path_.string() + "-wal";
+  EXPECT_EQ(fs::exists(wal) ? fs::file_size(wal) : 0u, 0u);
+  EXPECT_EQ(query(path_, "SELECT ended_wall_ns IS NULL FROM sessions"), "1");
+}
+
+TEST_F(StoreTest, ReadOnlyOpenOfAMissingFileFailsWithoutCreatingIt) {
+  const std::string message = error_of([&] { Store store(path_, {.read_only = true}); });
+  EXPECT_EQ(message, path_.string() + ": unable to open database file");
+  EXPECT_FALSE(fs::exists(path_));
+}
+
+TEST_F(StoreTest, NewDatabaseCarriesTheSchemaVersionAndApplicationId) {
+  Store store(path_);
+  EXPECT_EQ(query(path_, "PRAGMA user_version"), std::to_string(kSchemaVersion));
+  EXPECT_EQ(query(path_, "PRAGMA application_id"), std::to_string(0x494D5542));  // "IMUB"
+  EXPECT_EQ(query(path_, "PRAGMA journal_mode"), "wal");
+}
+
+TEST_F(StoreTest, NewerSchemaIsAOneLineErrorAndTheFileIsLeftAlone) {
+  { Store store(path_); }
+  execute(path_, "PRAGMA user_version = 7");
+  const std::vector<char> before = file_bytes(path_);
+  const std::string expected =
+      path_.string() + " was written by a newer imubridge (schema 7, this build reads up to 1)";
+  EXPECT_EQ(error_of([&] { Store store(path_); }), expected);
+  EXPECT_EQ(error_of([&] { Store store(path_, {.read_only = true}); }), expected);
+  EXPECT_EQ(file_bytes(path_), before);
+}
+
+TEST_F(StoreTest, FileThatIsNotADatabaseIsAOneLineErrorAndIsLeftAlone) {
+  std::ofstream(path_) << "time,ax,ay,az\n0,0.1,0.2,9.8\n";  // shorter than a SQLite header
+  std::ofstream(dir_ / "big.txt") << std::string(8192, 'x');
+  for (const fs::path& path : {path_, dir_ / "big.txt"}) {
+    const std::vector<char> before = file_bytes(path);
+    EXPECT_EQ(error_of([&] { Store store(path); }), path.string() + ": file is not a database");
+    EXPECT_EQ(error_of([&] { Store store(path, {.read_only = true}); }), path.string() + ": file is not a database");
+    EXPECT_EQ(file_bytes(path), before);
+  }
+}
+
+TEST_F(StoreTest, AnotherProgramsDatabaseIsRefusedAndLeftAlone) {
+  execute(path_, "CREATE TABLE contacts (name TEXT)");
+  const std::vector<char> before = file_bytes(path_);
+  EXPECT_EQ(error_of([&] { Store store(path_); }),
+            path_.string() + " is a SQLite database of another program (application_id 0), not an imubridge one");
+  EXPECT_EQ(file_bytes(path_), before);
+}
+
+// Hypothetical schema versions 1 and 2, to exercise the mechanism beyond this build's single step.
+constexpr MigrationStep kSteps[] = {
+    [](Database& db) { db.exec("CREATE TABLE t (x INTEGER)"); },
+    [](Database& db) { db.exec("ALTER TABLE t ADD COLUMN y TEXT DEFAULT 'two'"); },
+};
+
+TEST_F(StoreTest, MigrationRunsOnlyTheMissingSteps) {
+  Database db(path_, false);
+  migrate(db, std::span(kSteps).first(1));
+  EXPECT_EQ(db.query_int("PRAGMA user_version"), 1);
+  db.exec("INSERT INTO t (x) VALUES (41)");
+  migrate(db, kSteps);  // step 0 again would fail: t exists
+  EXPECT_EQ(db.query_int("PRAGMA user_version"), 2);
+  EXPECT_EQ(db.query_int("SELECT count(*) FROM t WHERE x = 41 AND y = 'two'"), 1);
+  migrate(db, kSteps);
+  EXPECT_EQ(db.query_int("PRAGMA user_version"), 2);
+}
+
+TEST_F(StoreTest, FailingMigrationLeavesTheFileAtItsOldVersion) {
+  const MigrationStep steps[] = {kSteps[0], [](Database& db) { db.exec("ALTER TABLE missing ADD COLUMN z"); }};
+  Database db(path_, false);
+  const std::string message = error_of([&] { migrate(db, steps); });
+  EXPECT_EQ(message, path_.string() + ": no such table: missing");
+  EXPECT_FALSE(db.in_transaction());
+  EXPECT_EQ(db.query_int("PRAGMA user_version"), 0);
+  EXPECT_EQ(db.query_int("SELECT count(*) FROM sqlite_schema"), 0) << "step 0 was rolled back with step 1";
+}
+
+TEST_F(StoreTest, MigrationRefusesADatabaseNewerThanItsSteps) {
+  Database db(path_, false);
+  migrate(db, kSteps);
+  EXPECT_EQ(error_of([&] { migrate(db, std::span(kSteps).first(1)); }),
+            path_.string() + " was written by a newer imubridge (schema 2, this build reads up to 1)");
+  EXPECT_EQ(db.query_int("PRAGMA user_version"), 2);
+}
+
+}  // namespace
+}  // namespace imubridge::store
