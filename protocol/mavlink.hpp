@@ -1,0 +1,91 @@
+#pragma once
+// MAVLink v1 and v2 framing: a streaming decoder, an encoder, and the way from a message to the pipeline's Sample.
+// Framing, CRC_EXTRA, the rule for unknown ids, the resync rule and the counters: docs/protocol-mavlink.md.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+#include "protocol/calibration.hpp"
+#include "protocol/decoder_counters.hpp"
+#include "protocol/mavlink_messages.hpp"
+#include "protocol/sample.hpp"
+
+namespace imubridge::protocol::mavlink {
+
+inline constexpr std::uint8_t kStxV1 = 0xFE, kStxV2 = 0xFD;
+inline constexpr std::uint8_t kIncompatSigned = 0x01;                // the only MAVLink 2 incompat flag defined
+inline constexpr std::size_t kHeaderSizeV1 = 6, kHeaderSizeV2 = 10;  // STX included
+inline constexpr std::size_t kCrcSize = 2, kSignatureSize = 13;
+inline constexpr std::size_t kMaxFrameSize = kHeaderSizeV2 + 255 + kCrcSize + kSignatureSize;
+
+// One frame that passed every check, whatever its message id.
+struct Message {
+  std::uint8_t version = 2;  // 1 or 2
+  std::uint8_t seq = 0, sysid = 0, compid = 0;
+  std::uint32_t msgid = 0;                  // 8 bits in MAVLink 1, 24 in MAVLink 2
+  std::uint8_t len = 0;                     // payload length as on the wire (a v2 sender may truncate)
+  std::array<std::uint8_t, 255> payload{};  // zero-filled beyond len
+  bool signed_ = false;                     // v2 signature present (skipped, not verified)
+  friend bool operator==(const Message&, const Message&) = default;
+};
+
+struct FrameOptions {
+  std::uint8_t version = 2;  // 1 or 2
+  std::uint8_t seq = 0, sysid = 1, compid = 1;
+  bool truncate = true;  // v2: drop trailing zero payload bytes, keeping at least one, as MAVLink 2 senders do
+  bool sign = false;     // v2: set the signed flag and append a dummy (all-zero) 13-byte signature
+};
+
+// A message carrying `payload` as `msgid`. Throws std::invalid_argument for what the wire cannot carry: a payload
+// over 255 bytes, or in version 1 an id over 255 or a signature.
+Message make_message(std::uint32_t msgid, std::span<const std::uint8_t> payload, const FrameOptions& options);
+// A typed message; version 1 carries its base fields only.
+Message make_message(const Decoded& message, const FrameOptions& options);
+
+// Appends `m` as a frame. Its CRC takes the CRC_EXTRA of m.msgid, or 0 for an id without one (which no receiver
+// can check anyway).
+void encode(const Message& m, std::vector<std::uint8_t>& out);
+
+inline std::optional<Decoded> decode(const Message& m) {
+  return decode_payload(m.msgid, std::span(m.payload).first(m.len));
+}
+
+// Streaming decoder for one link: frames come out in stream order whatever the chunking. A candidate that fails
+// any check is a false start and the search resumes at the byte after its STX, so a frame that begins inside
+// rejected bytes is still found.
+class Decoder {
+ public:
+  void feed(std::span<const std::uint8_t> chunk, std::vector<Message>& out);
+  // End of stream: a frame with an unknown id that ends exactly here is emitted; a cut-off candidate is a false
+  // start, and the search goes on through the bytes after its STX.
+  void finish(std::vector<Message>& out);
+  const DecoderCounters& counters() const { return counters_; }
+
+ private:
+  // Decodes what `data` decides; returns how many leading bytes that used up. The rest starts a candidate that
+  // needs more bytes (none when `at_end`).
+  std::size_t scan(std::span<const std::uint8_t> data, bool at_end, std::vector<Message>& out);
+  // Counts an emitted frame, and any gap in its sender's sequence numbers.
+  void count(const Message& m);
+
+  DecoderCounters counters_;
+  std::vector<std::uint8_t> pending_;                         // an undecided candidate carried over from feed to feed
+  std::unordered_map<std::uint16_t, std::uint8_t> last_seq_;  // by sysid << 8 | compid
+};
+
+// {"protocol":"mavlink","version":2,"seq":..,"sysid":..,"compid":..,"msgid":105,"len":63,"signed":false,
+//  "name":"HIGHRES_IMU", then the decoded fields by their MAVLink names}; other ids carry "payload" as upper-case
+// hex instead of a name and fields.
+void to_json(nlohmann::json& j, const Message& m);
+
+// HIGHRES_IMU, SCALED_IMU, and RAW_IMU given the IMU's calibration, as a Sample in SI units; nothing for other
+// messages (ATTITUDE included) or for RAW_IMU without a calibration. seq is the 8-bit wire number; link_id and
+// recv_mono_ns are the caller's to fill.
+std::optional<Sample> to_sample(const Message& m, const Calibration* raw_calibration);
+
+}  // namespace imubridge::protocol::mavlink

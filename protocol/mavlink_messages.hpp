@@ -1,0 +1,127 @@
+#pragma once
+// The MAVLink messages imubridge reads, as common.xml defines them, and the CRC_EXTRA of every common.xml message.
+// Payload layouts only: framing is protocol/mavlink.hpp. Units and conversion to samples: docs/protocol-mavlink.md.
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+namespace imubridge::protocol::mavlink {
+
+// The CRC_EXTRA byte of a common.xml (or minimal.xml) message, or nothing for an id this table does not know.
+std::optional<std::uint8_t> crc_extra(std::uint32_t msgid);
+
+// Each message lists its fields in wire order through for_each_field(m, f), which calls f(name, field): MAVLink
+// sorts the base fields by type size (stable), then appends the extension fields in definition order. Extension
+// fields read 0 when the sender left them out (MAVLink 1, or a sender that predates them).
+
+struct HighresImu {
+  static constexpr std::uint32_t kId = 105;
+  static constexpr std::string_view kName = "HIGHRES_IMU";
+  static constexpr std::size_t kBaseLength = 62, kLength = 63;  // payload bytes without / with the extensions
+
+  std::uint64_t time_usec = 0;
+  float xacc = 0, yacc = 0, zacc = 0;         // m/s^2
+  float xgyro = 0, ygyro = 0, zgyro = 0;      // rad/s
+  float xmag = 0, ymag = 0, zmag = 0;         // gauss
+  float abs_pressure = 0, diff_pressure = 0;  // hPa
+  float pressure_alt = 0;                     // m
+  float temperature = 0;                      // degC
+  std::uint16_t fields_updated = 0;           // HIGHRES_IMU_UPDATED_FLAGS: bit i set = field i (xacc = 0) is fresh
+  std::uint8_t id = 0;                        // extension: which IMU (0 = IMU1)
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_usec", m.time_usec);
+    f("xacc", m.xacc), f("yacc", m.yacc), f("zacc", m.zacc);
+    f("xgyro", m.xgyro), f("ygyro", m.ygyro), f("zgyro", m.zgyro);
+    f("xmag", m.xmag), f("ymag", m.ymag), f("zmag", m.zmag);
+    f("abs_pressure", m.abs_pressure), f("diff_pressure", m.diff_pressure), f("pressure_alt", m.pressure_alt);
+    f("temperature", m.temperature);
+    f("fields_updated", m.fields_updated);
+    f("id", m.id);
+  }
+  friend bool operator==(const HighresImu&, const HighresImu&) = default;
+};
+
+struct ScaledImu {
+  static constexpr std::uint32_t kId = 26;
+  static constexpr std::string_view kName = "SCALED_IMU";
+  static constexpr std::size_t kBaseLength = 22, kLength = 24;
+
+  std::uint32_t time_boot_ms = 0;
+  std::int16_t xacc = 0, yacc = 0, zacc = 0;     // mG
+  std::int16_t xgyro = 0, ygyro = 0, zgyro = 0;  // mrad/s
+  std::int16_t xmag = 0, ymag = 0, zmag = 0;     // mgauss
+  std::int16_t temperature = 0;                  // extension: cdegC, 0 = not provided (0 degC is sent as 1)
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_boot_ms", m.time_boot_ms);
+    f("xacc", m.xacc), f("yacc", m.yacc), f("zacc", m.zacc);
+    f("xgyro", m.xgyro), f("ygyro", m.ygyro), f("zgyro", m.zgyro);
+    f("xmag", m.xmag), f("ymag", m.ymag), f("zmag", m.zmag);
+    f("temperature", m.temperature);
+  }
+  friend bool operator==(const ScaledImu&, const ScaledImu&) = default;
+};
+
+struct RawImu {
+  static constexpr std::uint32_t kId = 27;
+  static constexpr std::string_view kName = "RAW_IMU";
+  static constexpr std::size_t kBaseLength = 26, kLength = 29;
+
+  std::uint64_t time_usec = 0;
+  std::int16_t xacc = 0, yacc = 0, zacc = 0;  // sensor counts
+  std::int16_t xgyro = 0, ygyro = 0, zgyro = 0;
+  std::int16_t xmag = 0, ymag = 0, zmag = 0;
+  std::uint8_t id = 0;           // extension: which IMU (0 = IMU1)
+  std::int16_t temperature = 0;  // extension: cdegC, 0 = not provided (0 degC is sent as 1)
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_usec", m.time_usec);
+    f("xacc", m.xacc), f("yacc", m.yacc), f("zacc", m.zacc);
+    f("xgyro", m.xgyro), f("ygyro", m.ygyro), f("zgyro", m.zgyro);
+    f("xmag", m.xmag), f("ymag", m.ymag), f("zmag", m.zmag);
+    f("id", m.id);
+    f("temperature", m.temperature);
+  }
+  friend bool operator==(const RawImu&, const RawImu&) = default;
+};
+
+struct Attitude {
+  static constexpr std::uint32_t kId = 30;
+  static constexpr std::string_view kName = "ATTITUDE";
+  static constexpr std::size_t kBaseLength = 28, kLength = 28;
+
+  std::uint32_t time_boot_ms = 0;
+  float roll = 0, pitch = 0, yaw = 0;                 // rad
+  float rollspeed = 0, pitchspeed = 0, yawspeed = 0;  // rad/s
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_boot_ms", m.time_boot_ms);
+    f("roll", m.roll), f("pitch", m.pitch), f("yaw", m.yaw);
+    f("rollspeed", m.rollspeed), f("pitchspeed", m.pitchspeed), f("yawspeed", m.yawspeed);
+  }
+  friend bool operator==(const Attitude&, const Attitude&) = default;
+};
+
+// The messages that get typed fields; every other id is carried as payload bytes only.
+using Decoded = std::variant<HighresImu, ScaledImu, RawImu, Attitude>;
+
+bool is_decoded(std::uint32_t msgid);
+
+// The typed fields of a payload as received; bytes missing at the end (MAVLink 2 truncation) read as zero.
+std::optional<Decoded> decode_payload(std::uint32_t msgid, std::span<const std::uint8_t> payload);
+
+// The message's full payload, or only its base fields when `extensions` is false (what MAVLink 1 carries).
+std::vector<std::uint8_t> encode_payload(const Decoded& message, bool extensions = true);
+
+std::uint32_t message_id(const Decoded& message);
+
+}  // namespace imubridge::protocol::mavlink

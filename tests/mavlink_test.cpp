@@ -1,0 +1,723 @@
+#include "protocol/mavlink.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "protocol/crc.hpp"
+
+namespace imubridge::protocol::mavlink {
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+
+void append(Bytes& stream, const Bytes& bytes) { stream.insert(stream.end(), bytes.begin(), bytes.end()); }
+
+Bytes bytes_of(const Message& m) {
+  Bytes out;
+  encode(m, out);
+  return out;
+}
+
+Bytes bytes_of(const Decoded& message, const FrameOptions& options) { return bytes_of(make_message(message, options)); }
+
+struct Decoding {
+  std::vector<Message> messages;
+  DecoderCounters counters;
+};
+
+// Feeds `stream` in pieces of `chunk` bytes (0: all at once), then finishes.
+Decoding decode_stream(std::span<const std::uint8_t> stream, std::size_t chunk = 0) {
+  Decoder decoder;
+  Decoding r;
+  if (chunk == 0) chunk = std::max<std::size_t>(stream.size(), 1);
+  for (std::size_t at = 0; at < stream.size(); at += chunk) {
+    decoder.feed(stream.subspan(at, std::min(chunk, stream.size() - at)), r.messages);
+  }
+  decoder.finish(r.messages);
+  r.counters = decoder.counters();
+  return r;
+}
+
+std::uint64_t frame_bytes(const std::vector<Message>& messages) {
+  std::uint64_t n = 0;
+  for (const Message& m : messages) n += bytes_of(m).size();
+  return n;
+}
+
+// Tests that count false starts exactly damage frames whose only STX is their first byte: another one inside would
+// be one more candidate to reject.
+bool stx_only_in_front(const Bytes& frame) {
+  return std::none_of(frame.begin() + 1, frame.end(), [](std::uint8_t b) { return b == kStxV1 || b == kStxV2; });
+}
+
+// ---- The messages, as common.xml (and minimal.xml for HEARTBEAT) define them ----
+
+// Fields in definition order, with the types as the XML writes them; extensions apart.
+struct FieldDef {
+  std::string_view type, name;
+};
+struct MessageDef {
+  std::string_view name;
+  std::uint32_t id;
+  std::vector<FieldDef> fields, extensions;
+};
+
+const MessageDef kHighresImuDef{"HIGHRES_IMU",
+                                105,
+                                {{"uint64_t", "time_usec"},
+                                 {"float", "xacc"},
+                                 {"float", "yacc"},
+                                 {"float", "zacc"},
+                                 {"float", "xgyro"},
+                                 {"float", "ygyro"},
+                                 {"float", "zgyro"},
+                                 {"float", "xmag"},
+                                 {"float", "ymag"},
+                                 {"float", "zmag"},
+                                 {"float", "abs_pressure"},
+                                 {"float", "diff_pressure"},
+                                 {"float", "pressure_alt"},
+                                 {"float", "temperature"},
+                                 {"uint16_t", "fields_updated"}},
+                                {{"uint8_t", "id"}}};
+const MessageDef kScaledImuDef{"SCALED_IMU",
+                               26,
+                               {{"uint32_t", "time_boot_ms"},
+                                {"int16_t", "xacc"},
+                                {"int16_t", "yacc"},
+                                {"int16_t", "zacc"},
+                                {"int16_t", "xgyro"},
+                                {"int16_t", "ygyro"},
+                                {"int16_t", "zgyro"},
+                                {"int16_t", "xmag"},
+                                {"int16_t", "ymag"},
+                                {"int16_t", "zmag"}},
+                               {{"int16_t", "temperature"}}};
+const MessageDef kRawImuDef{"RAW_IMU",
+                            27,
+                            {{"uint64_t", "time_usec"},
+                             {"int16_t", "xacc"},
+                             {"int16_t", "yacc"},
+                             {"int16_t", "zacc"},
+                             {"int16_t", "xgyro"},
+                             {"int16_t", "ygyro"},
+                             {"int16_t", "zgyro"},
+                             {"int16_t", "xmag"},
+                             {"int16_t", "ymag"},
+                             {"int16_t", "zmag"}},
+                            {{"uint8_t", "id"}, {"int16_t", "temperature"}}};
+const MessageDef kAttitudeDef{"ATTITUDE",
+                              30,
+                              {{"uint32_t", "time_boot_ms"},
+                               {"float", "roll"},
+                               {"float", "pitch"},
+                               {"float", "yaw"},
+                               {"float", "rollspeed"},
+                               {"float", "pitchspeed"},
+                               {"float", "yawspeed"}},
+                              {}};
+// Two that exercise the rest of the rules: a field to re-order, MAVLink's own version type, and an array.
+const MessageDef kHeartbeatDef{"HEARTBEAT",
+                               0,
+                               {{"uint8_t", "type"},
+                                {"uint8_t", "autopilot"},
+                                {"uint8_t", "base_mode"},
+                                {"uint32_t", "custom_mode"},
+                                {"uint8_t", "system_status"},
+                                {"uint8_t_mavlink_version", "mavlink_version"}},
+                               {}};
+const MessageDef kParamValueDef{"PARAM_VALUE",
+                                22,
+                                {{"char[16]", "param_id"},
+                                 {"float", "param_value"},
+                                 {"uint8_t", "param_type"},
+                                 {"uint16_t", "param_count"},
+                                 {"uint16_t", "param_index"}},
+                                {}};
+
+struct WireField {
+  std::string type;  // element type, as it enters CRC_EXTRA
+  std::string_view name;
+  std::size_t array_length = 0;  // 0: not an array
+  std::size_t element_size = 0;
+  std::size_t offset = 0;
+};
+
+std::size_t type_size(std::string_view type) {
+  if (type == "uint8_t" || type == "int8_t" || type == "char") return 1;
+  if (type == "uint16_t" || type == "int16_t") return 2;
+  if (type == "uint32_t" || type == "int32_t" || type == "float") return 4;
+  if (type == "uint64_t" || type == "int64_t" || type == "double") return 8;
+  throw std::invalid_argument("unknown type " + std::string(type));
+}
+
+WireField wire_field(const FieldDef& def) {
+  WireField f;
+  f.type = def.type;
+  f.name = def.name;
+  if (const auto bracket = f.type.find('['); bracket != std::string::npos) {
+    f.array_length = std::stoul(f.type.substr(bracket + 1));
+    f.type.resize(bracket);
+  }
+  if (f.type == "uint8_t_mavlink_version") f.type = "uint8_t";
+  f.element_size = type_size(f.type);
+  return f;
+}
+
+// MAVLink's wire order: base fields sorted by element size, largest first, keeping definition order among equals;
+// extensions after them in definition order.
+std::vector<WireField> wire_order(const MessageDef& def) {
+  std::vector<WireField> fields;
+  for (const FieldDef& f : def.fields) fields.push_back(wire_field(f));
+  std::ranges::stable_sort(fields, std::greater<>{}, &WireField::element_size);
+  for (const FieldDef& f : def.extensions) fields.push_back(wire_field(f));
+  std::size_t offset = 0;
+  for (WireField& f : fields) {
+    f.offset = offset;
+    offset += f.element_size * std::max<std::size_t>(f.array_length, 1);
+  }
+  return fields;
+}
+
+// CRC_EXTRA as MAVLink's generator computes it: the CRC of the message name and of each base field's type and name
+// (each followed by a space) and array length, folded to one byte.
+std::uint8_t crc_extra_from_definition(const MessageDef& def) {
+  auto add = [](std::uint16_t crc, std::string_view text) {
+    for (char c : text) crc = crc16_mcrf4xx_update(crc, static_cast<std::uint8_t>(c));
+    return crc16_mcrf4xx_update(crc, ' ');
+  };
+  std::uint16_t crc = add(kCrc16Init, def.name);
+  const std::vector<WireField> fields = wire_order(def);
+  for (std::size_t i = 0; i < def.fields.size(); ++i) {
+    crc = add(add(crc, fields[i].type), fields[i].name);
+    if (fields[i].array_length) crc = crc16_mcrf4xx_update(crc, static_cast<std::uint8_t>(fields[i].array_length));
+  }
+  return static_cast<std::uint8_t>((crc & 0xFF) ^ (crc >> 8));
+}
+
+std::size_t payload_length(const std::vector<WireField>& fields, std::size_t count) {
+  return count == 0 ? 0 : fields[count - 1].offset + fields[count - 1].element_size;
+}
+
+// A scalar field read straight from payload bytes, as JSON, to compare with what to_json made of the same field.
+nlohmann::json read_field(const WireField& f, const std::uint8_t* p) {
+  std::uint64_t bits = 0;
+  for (std::size_t i = 0; i < f.element_size; ++i) bits |= std::uint64_t{p[i]} << (8 * i);
+  if (f.type == "float") return std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+  if (f.type == "int16_t") return static_cast<std::int16_t>(bits);
+  return bits;  // the unsigned types
+}
+
+// CRC-16/MCRF4XX bit by bit, straight from its definition: apart from protocol/crc.cpp and its tables.
+std::uint16_t crc_bit_serial(std::span<const std::uint8_t> data) {
+  std::uint16_t crc = 0xFFFF;
+  for (std::uint8_t byte : data) {
+    crc ^= byte;
+    for (int bit = 0; bit < 8; ++bit) crc = (crc & 1) ? (crc >> 1) ^ 0x8408 : crc >> 1;
+  }
+  return crc;
+}
+
+TEST(MavlinkCrc, PublishedCheckValue) {
+  const std::string_view text = "123456789";
+  const std::span<const std::uint8_t> check(reinterpret_cast<const std::uint8_t*>(text.data()), text.size());
+  EXPECT_EQ(crc_bit_serial(check), 0x6F91);
+  EXPECT_EQ(crc16_mcrf4xx(check), 0x6F91);
+  EXPECT_EQ(crc16_mcrf4xx_fast(check), 0x6F91);  // what the decoder uses
+}
+
+TEST(MavlinkDefinitions, CrcExtraComputedFromTheDefinitions) {
+  for (const MessageDef* def :
+       {&kHighresImuDef, &kScaledImuDef, &kRawImuDef, &kAttitudeDef, &kHeartbeatDef, &kParamValueDef}) {
+    EXPECT_EQ(crc_extra(def->id), crc_extra_from_definition(*def)) << def->name;
+  }
+  EXPECT_EQ(crc_extra(0xABCDE), std::nullopt);
+}
+
+template <typename M>
+void expect_layout_matches(const MessageDef& def) {
+  SCOPED_TRACE(def.name);
+  const std::vector<WireField> fields = wire_order(def);
+  EXPECT_EQ(M::kId, def.id);
+  EXPECT_EQ(M::kName, def.name);
+  EXPECT_EQ(M::kBaseLength, payload_length(fields, def.fields.size()));
+  EXPECT_EQ(M::kLength, payload_length(fields, fields.size()));
+
+  // Every field a different value, with every byte of it significant.
+  M sent;
+  std::uint64_t k = 0;
+  M::for_each_field(sent, [&k](std::string_view, auto& field) {
+    using T = std::remove_reference_t<decltype(field)>;
+    ++k;
+    if constexpr (std::is_floating_point_v<T>) {
+      field = static_cast<T>(k) + 0.375f;
+    } else {
+      field = static_cast<T>(0xF0E0D0C0B0A09080ull + k);
+    }
+  });
+  const Message m = make_message(sent, {.truncate = false});
+  ASSERT_EQ(m.len, M::kLength);
+  const nlohmann::json j = m;
+  EXPECT_EQ(j["name"], def.name);
+  for (const WireField& f : fields) EXPECT_EQ(read_field(f, &m.payload[f.offset]), j[f.name]) << f.name;
+  EXPECT_EQ(std::get<M>(decode(m).value()), sent);
+}
+
+TEST(MavlinkDefinitions, WireLayoutMatchesTheDefinitions) {
+  expect_layout_matches<HighresImu>(kHighresImuDef);
+  expect_layout_matches<ScaledImu>(kScaledImuDef);
+  expect_layout_matches<RawImu>(kRawImuDef);
+  expect_layout_matches<Attitude>(kAttitudeDef);
+}
+
+// ---- Framing ----
+
+// The example of docs/protocol-mavlink.md: SCALED_IMU in MAVLink 2, written byte by byte from the layout.
+const Bytes kDocExample = {
+    0xFD,                                // STX: MAVLink 2
+    0x18, 0x00, 0x00,                    // len 24, incompat flags, compat flags
+    0x07, 0x01, 0x01,                    // seq 7, sysid 1, compid 1
+    0x1A, 0x00, 0x00,                    // msgid 26 (SCALED_IMU), 24-bit little-endian
+    0x40, 0xE2, 0x01, 0x00,              // time_boot_ms 123456
+    0x0C, 0x00, 0xE7, 0xFF, 0x15, 0xFC,  // acc 12, -25, -1003 mG
+    0x05, 0x00, 0xF9, 0xFF, 0x2C, 0x01,  // gyro 5, -7, 300 mrad/s
+    0xD2, 0x00, 0xA1, 0xFF, 0x20, 0xFE,  // mag 210, -95, -480 mgauss
+    0x35, 0x0C,                          // temperature 3125 cdegC (extension)
+    0x68, 0x9B,                          // CRC 0x9B68
+};
+const ScaledImu kDocScaledImu{123456, 12, -25, -1003, 5, -7, 300, 210, -95, -480, 3125};
+
+TEST(MavlinkFrame, DocumentedExample) {
+  Bytes covered(kDocExample.begin() + 1, kDocExample.end() - 2);  // after the STX through the payload
+  covered.push_back(170);                                         // SCALED_IMU's CRC_EXTRA
+  EXPECT_EQ(crc_bit_serial(covered), 0x9B68);
+
+  EXPECT_EQ(bytes_of(kDocScaledImu, {.seq = 7}), kDocExample);
+  const Decoding r = decode_stream(kDocExample);
+  ASSERT_EQ(r.messages.size(), 1u);
+  const Message& m = r.messages[0];
+  EXPECT_EQ(m.version, 2);
+  EXPECT_EQ(m.seq, 7);
+  EXPECT_EQ(m.sysid, 1);
+  EXPECT_EQ(m.compid, 1);
+  EXPECT_EQ(m.msgid, 26u);
+  EXPECT_EQ(m.len, 24);
+  EXPECT_FALSE(m.signed_);
+  EXPECT_EQ(std::get<ScaledImu>(decode(m).value()), kDocScaledImu);
+}
+
+const HighresImu kHighres{.time_usec = 1'700'000'123'456,
+                          .xacc = 0.125f,
+                          .yacc = -0.5f,
+                          .zacc = -9.80665f,
+                          .xgyro = 0.01f,
+                          .ygyro = -0.02f,
+                          .zgyro = 0.5f,
+                          .xmag = 0.25f,
+                          .ymag = -0.0625f,
+                          .zmag = 0.5f,
+                          .abs_pressure = 1013.25f,
+                          .diff_pressure = 0.5f,
+                          .pressure_alt = 120.5f,
+                          .temperature = 31.5f,
+                          .fields_updated = 0x1FFF,
+                          .id = 1};
+const ScaledImu kScaled{.time_boot_ms = 4000000,
+                        .xacc = 12,
+                        .yacc = -25,
+                        .zacc = -1003,
+                        .xgyro = 5,
+                        .ygyro = -7,
+                        .zgyro = 300,
+                        .xmag = 210,
+                        .ymag = -95,
+                        .zmag = -180,
+                        .temperature = 3125};
+const RawImu kRaw{.time_usec = 987654321,
+                  .xacc = 2050,
+                  .yacc = 2043,
+                  .zacc = 1527,
+                  .xgyro = -12,
+                  .ygyro = 5,
+                  .zgyro = 300,
+                  .xmag = 210,
+                  .ymag = -95,
+                  .zmag = -180,
+                  .id = 2,
+                  .temperature = -1550};
+const Attitude kAttitude{.time_boot_ms = 4000010,
+                         .roll = 0.1f,
+                         .pitch = -0.2f,
+                         .yaw = 3.0f,
+                         .rollspeed = 0.01f,
+                         .pitchspeed = -0.02f,
+                         .yawspeed = 0.03f};
+
+TEST(MavlinkFrame, RoundTripsEveryMessageInEveryFraming) {
+  // What MAVLink 1 carries: the base fields; the extensions read back as zero.
+  HighresImu highres_base = kHighres;
+  highres_base.id = 0;
+  ScaledImu scaled_base = kScaled;
+  scaled_base.temperature = 0;
+  RawImu raw_base = kRaw;
+  raw_base.id = 0;
+  raw_base.temperature = 0;
+  // For truncation: values whose last payload bytes are zero, and the length MAVLink 2 sends them with.
+  Attitude attitude_still = kAttitude;
+  attitude_still.pitchspeed = attitude_still.yawspeed = 0;
+
+  struct Case {
+    Decoded sent;
+    FrameOptions options;
+    Decoded received;
+    std::size_t len;
+  };
+  const std::vector<Case> cases = {
+      {kHighres, {.version = 1}, highres_base, 62},
+      {kHighres, {.version = 2}, kHighres, 63},
+      {highres_base, {.version = 2}, highres_base, 62},  // the zero id is truncated
+      {highres_base, {.version = 2, .truncate = false}, highres_base, 63},
+      {kHighres, {.version = 2, .sign = true}, kHighres, 63},
+      {kScaled, {.version = 1}, scaled_base, 22},
+      {kScaled, {.version = 2}, kScaled, 24},
+      {scaled_base, {.version = 2}, scaled_base, 22},
+      {kScaled, {.version = 2, .sign = true}, kScaled, 24},
+      {kRaw, {.version = 1}, raw_base, 26},
+      {kRaw, {.version = 2}, kRaw, 29},
+      {raw_base, {.version = 2}, raw_base, 26},
+      {kRaw, {.version = 2, .sign = true}, kRaw, 29},
+      {kAttitude, {.version = 1}, kAttitude, 28},
+      {kAttitude, {.version = 2}, kAttitude, 28},
+      {attitude_still, {.version = 2}, attitude_still, 20},
+      {kAttitude, {.version = 2, .sign = true}, kAttitude, 28},
+  };
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const Case& c = cases[i];
+    SCOPED_TRACE("case " + std::to_string(i));
+    FrameOptions options = c.options;
+    options.seq = 200;
+    options.sysid = 42;
+    options.compid = 7;
+    const Bytes bytes = bytes_of(c.sent, options);
+    const std::size_t header = c.options.version == 1 ? 6 : 10;
+    EXPECT_EQ(bytes.size(), header + c.len + 2 + (c.options.sign ? 13 : 0));
+
+    const Decoding r = decode_stream(bytes);
+    ASSERT_EQ(r.messages.size(), 1u);
+    const Message& m = r.messages[0];
+    EXPECT_EQ(m, make_message(c.sent, options));
+    EXPECT_EQ(m.version, c.options.version);
+    EXPECT_EQ(m.len, c.len);
+    EXPECT_EQ(m.signed_, c.options.sign);
+    EXPECT_EQ(std::tie(m.seq, m.sysid, m.compid), std::make_tuple(200, 42, 7));
+    EXPECT_EQ(m.msgid, message_id(c.sent));
+    EXPECT_EQ(decode(m), c.received);
+    EXPECT_EQ(r.counters.bytes_discarded, 0u);
+    EXPECT_EQ(r.counters.unsupported, 0u);
+  }
+}
+
+TEST(MavlinkFrame, SignatureIsSkippedWhateverItHolds) {
+  Bytes signed_frame = bytes_of(kAttitude, {.sign = true});
+  std::fill(signed_frame.end() - 13, signed_frame.end(), kStxV2);  // outside the CRC: any bytes must do
+  Bytes stream = signed_frame;
+  append(stream, bytes_of(kScaled, {.seq = 1}));
+  const Decoding r = decode_stream(stream);
+  ASSERT_EQ(r.messages.size(), 2u);
+  EXPECT_TRUE(r.messages[0].signed_);
+  EXPECT_EQ(decode(r.messages[1]), Decoded{kScaled});
+  EXPECT_EQ(r.counters.resyncs, 0u);
+  EXPECT_EQ(r.counters.bytes_discarded, 0u);
+}
+
+TEST(MavlinkFrame, EncoderRejectsWhatTheWireCannotCarry) {
+  const Bytes payload(10, 1);
+  EXPECT_THROW(make_message(300, payload, {.version = 1}), std::invalid_argument);
+  EXPECT_THROW(make_message(0x1000000, payload, {.version = 2}), std::invalid_argument);
+  EXPECT_THROW(make_message(0, Bytes(256, 1), {}), std::invalid_argument);
+  EXPECT_THROW(make_message(0, payload, {.version = 1, .sign = true}), std::invalid_argument);
+  EXPECT_THROW(make_message(0, payload, {.version = 3}), std::invalid_argument);
+  EXPECT_EQ(make_message(0, Bytes(9, 0), {}).len, 1);  // MAVLink 2 keeps one byte of an all-zero payload
+}
+
+// ---- Decoder ----
+
+constexpr std::uint32_t kUnknownId = 0xABCDE;  // in no dialect this table knows
+
+// A HEARTBEAT: known, CRC-checked, but not decoded.
+Bytes heartbeat(std::uint8_t seq) {
+  const Bytes payload = {0x04, 0, 0, 0, 2, 12, 0x81, 4, 3};  // custom mode 4, quadrotor, PX4, armed, active, v3
+  return bytes_of(make_message(0, payload, {.seq = seq}));
+}
+
+// A stream with every kind of trouble, each kind once or twice.
+Bytes troubled_stream() {
+  Bytes s = {0x00, 0x11, kStxV1, 0x22, kStxV2};  // noise with stray STX bytes
+  append(s, bytes_of(kHighres, {.seq = 0}));
+  Bytes flipped = bytes_of(kScaled, {.seq = 1});
+  flipped[20] ^= 0x04;
+  append(s, flipped);
+  append(s, {kStxV1, 30, 0, 1, 1, 30});  // an ATTITUDE header over 30 bytes; real frames begin inside it
+  append(s, bytes_of(kAttitude, {.version = 1, .seq = 2}));
+  append(s, heartbeat(3));
+  append(s, {kStxV2, 0xFF, 0, 0, 4, 1, 1, 27, 0, 0});  // a RAW_IMU header claiming 255 bytes, over six real frames
+  for (std::uint8_t seq = 4; seq < 10; ++seq) append(s, bytes_of(kRaw, {.seq = seq}));
+  append(s, {kStxV2, 4, 0x02, 0, 10, 1, 1, 30, 0, 0});                         // an incompat flag we cannot parse
+  append(s, bytes_of(make_message(kUnknownId, Bytes{1, 2, 3}, {.seq = 11})));  // trusted: an STX follows
+  append(s, bytes_of(kHighres, {.seq = 12, .sign = true}));
+  const Bytes last = bytes_of(kScaled, {.seq = 13});
+  s.insert(s.end(), last.begin(), last.begin() + 20);  // cut off by the end of the stream
+  return s;
+}
+
+TEST(MavlinkDecoder, SameMessagesAndCountersAtEverySplitPoint) {
+  const Bytes stream = troubled_stream();
+  const Decoding whole = decode_stream(stream);
+  ASSERT_EQ(whole.messages.size(), 11u);  // seq 0, 2..9, 11, 12
+  EXPECT_EQ(whole.counters.bytes_in, whole.counters.bytes_discarded + frame_bytes(whole.messages));
+
+  for (std::size_t split = 0; split <= stream.size(); ++split) {
+    Decoder decoder;
+    std::vector<Message> messages;
+    decoder.feed(std::span(stream).first(split), messages);
+    decoder.feed(std::span(stream).subspan(split), messages);
+    decoder.finish(messages);
+    ASSERT_EQ(messages, whole.messages) << "split at " << split;
+    ASSERT_EQ(decoder.counters(), whole.counters) << "split at " << split;
+  }
+}
+
+TEST(MavlinkDecoder, SameMessagesAndCountersForAnyChunkSize) {
+  Bytes stream;
+  for (int i = 0; i < 10; ++i) append(stream, troubled_stream());
+  const Decoding whole = decode_stream(stream);
+  for (std::size_t chunk : {1u, 2u, 3u, 35u, 36u, 37u, 280u, 281u, 282u, 4096u}) {
+    const Decoding r = decode_stream(stream, chunk);
+    EXPECT_EQ(r.messages, whole.messages) << "chunk " << chunk;
+    EXPECT_EQ(r.counters, whole.counters) << "chunk " << chunk;
+  }
+}
+
+TEST(MavlinkDecoder, GarbageTruncationAndBitFlipsCountedExactly) {
+  const Bytes noise = {0x00, 0x55, 0xAA, 0x13};
+  const Bytes a = bytes_of(kHighres, {.seq = 0});
+  Bytes b = bytes_of(kScaled, {.seq = 1});
+  const Bytes c = bytes_of(kAttitude, {.version = 1, .seq = 2});
+  const Bytes d = bytes_of(kRaw, {.seq = 3});
+  const Bytes e = bytes_of(kScaled, {.seq = 4});
+  b[15] ^= 0x01;  // a bit flip in the payload
+  ASSERT_TRUE(stx_only_in_front(b));
+  ASSERT_TRUE(stx_only_in_front(d));
+
+  Bytes stream = noise;
+  append(stream, a);
+  append(stream, b);
+  append(stream, c);
+  stream.insert(stream.end(), d.begin(), d.begin() + 17);  // d cut short: its CRC is checked over e's bytes
+  append(stream, e);
+  stream.push_back(0x77);  // trailing noise
+
+  const Decoding r = decode_stream(stream);
+  ASSERT_EQ(r.messages.size(), 3u);
+  EXPECT_EQ(r.messages[0], make_message(kHighres, {.seq = 0}));
+  EXPECT_EQ(r.messages[1], make_message(kAttitude, {.version = 1, .seq = 2}));
+  EXPECT_EQ(r.messages[2], make_message(kScaled, {.seq = 4}));
+
+  DecoderCounters expected;
+  expected.bytes_in = stream.size();
+  expected.frames_out = 3;
+  expected.crc_failures = 2;  // b and d
+  expected.resyncs = 2;
+  expected.bytes_discarded = noise.size() + b.size() + 17 + 1;
+  expected.sequence_gaps = 2;  // 0 -> 2 and 2 -> 4
+  expected.frames_lost = 2;
+  EXPECT_EQ(r.counters, expected);
+}
+
+TEST(MavlinkDecoder, FindsFrameStartingInsideRejectedCandidate) {
+  // A false STX whose header claims a known id and a length that covers the next frame and runs into the one after.
+  // A parser that drops a rejected candidate's claimed length (the MAVLink C library, mavlink-router) loses both.
+  const Bytes inner = bytes_of(kHighres, {.seq = 5});
+  const Bytes next = bytes_of(kAttitude, {.seq = 6});
+  const Bytes false_start = {kStxV1, static_cast<std::uint8_t>(inner.size() + 10), 9, 1, 1, HighresImu::kId};
+  Bytes stream = false_start;
+  append(stream, inner);
+  append(stream, next);
+
+  const Decoding r = decode_stream(stream);
+  ASSERT_EQ(r.messages.size(), 2u);
+  EXPECT_EQ(decode(r.messages[0]), Decoded{kHighres});
+  EXPECT_EQ(decode(r.messages[1]), Decoded{kAttitude});
+  EXPECT_EQ(r.counters.crc_failures, 1u);
+  EXPECT_EQ(r.counters.resyncs, 1u);
+  EXPECT_EQ(r.counters.bytes_discarded, false_start.size());
+}
+
+TEST(MavlinkDecoder, UnknownIdsAreCountedAndTrustedOnlyBeforeAnotherFrame) {
+  const Message unknown = make_message(kUnknownId, Bytes{9, 8, 7}, {.seq = 0});
+  const Bytes unknown_frame = bytes_of(unknown);
+  ASSERT_TRUE(stx_only_in_front(unknown_frame));
+  Bytes stream = unknown_frame;   // followed by an STX: accepted
+  append(stream, heartbeat(1));   // known id, not decoded: CRC-checked, counted unsupported
+  append(stream, unknown_frame);  // followed by a non-STX byte: a false start
+  stream.push_back(0x42);
+  Bytes bad_heartbeat = heartbeat(2);
+  bad_heartbeat[12] ^= 0x80;  // a known id's CRC is checked even though it is not decoded
+  ASSERT_TRUE(stx_only_in_front(bad_heartbeat));
+  append(stream, bad_heartbeat);
+  append(stream, unknown_frame);  // ends the stream: accepted at finish()
+
+  const Decoding r = decode_stream(stream);
+  ASSERT_EQ(r.messages.size(), 3u);
+  EXPECT_EQ(r.messages[0], unknown);
+  EXPECT_EQ(r.messages[1].msgid, 0u);
+  EXPECT_EQ(r.messages[2], unknown);
+  EXPECT_EQ(r.counters.unsupported, 3u);
+  EXPECT_EQ(r.counters.resyncs, 2u);
+  EXPECT_EQ(r.counters.crc_failures, 1u);
+  EXPECT_EQ(r.counters.bytes_discarded, unknown_frame.size() + 1 + bad_heartbeat.size());
+  EXPECT_EQ(nlohmann::json(r.messages[0])["payload"], "090807");
+
+  // Until the byte after it arrives (or the stream ends), an unknown-id frame is undecided.
+  Decoder decoder;
+  std::vector<Message> out;
+  decoder.feed(unknown_frame, out);
+  EXPECT_TRUE(out.empty());
+  decoder.feed(Bytes{kStxV1}, out);
+  EXPECT_EQ(out.size(), 1u);
+}
+
+TEST(MavlinkDecoder, SequenceGapsPerSenderWithWrap) {
+  struct Sent {
+    std::uint8_t sysid, compid, seq;
+  };
+  const std::vector<Sent> sent = {
+      {1, 1, 254},  {1, 200, 10}, {1, 1, 255}, {2, 1, 250}, {1, 1, 0},  // 255 -> 0 wraps without a gap
+      {1, 200, 12},                                                     // one frame lost
+      {1, 1, 1},    {2, 1, 3},                                          // 250 -> 3 across the wrap: 8 lost
+      {1, 1, 1},                                                        // a repeat reads as 255 lost
+  };
+  Bytes stream;
+  for (const Sent& s : sent) append(stream, bytes_of(kAttitude, {.seq = s.seq, .sysid = s.sysid, .compid = s.compid}));
+  const Decoding r = decode_stream(stream);
+  EXPECT_EQ(r.messages.size(), sent.size());
+  EXPECT_EQ(r.counters.sequence_gaps, 3u);
+  EXPECT_EQ(r.counters.frames_lost, 1u + 8u + 255u);
+}
+
+TEST(MavlinkDecoder, EveryByteIsInAFrameOrDiscarded) {
+  Bytes stream = troubled_stream();
+  for (std::size_t i = 0; i < 300; ++i) stream.push_back(static_cast<std::uint8_t>(i * 37 + 11));
+  append(stream, troubled_stream());
+  for (std::size_t chunk : {0u, 1u, 7u, 100u}) {
+    const Decoding r = decode_stream(stream, chunk);
+    EXPECT_EQ(r.counters.bytes_in, stream.size());
+    EXPECT_EQ(r.counters.frames_out, r.messages.size());
+    EXPECT_EQ(r.counters.bytes_in, frame_bytes(r.messages) + r.counters.bytes_discarded) << "chunk " << chunk;
+  }
+}
+
+// ---- JSON and samples ----
+
+TEST(MavlinkJson, HeaderAndDecodedFields) {
+  const Attitude attitude{4000010, 0.5f, -0.25f, 3.0f, 0.125f, -0.0625f, 1.5f};  // binary fractions: exact in JSON
+  const nlohmann::json j = make_message(attitude, {.seq = 3, .sysid = 1, .compid = 190});
+  EXPECT_EQ(j, nlohmann::json::parse(R"({"protocol":"mavlink","version":2,"seq":3,"sysid":1,"compid":190,"msgid":30,
+      "len":28,"signed":false,"name":"ATTITUDE","time_boot_ms":4000010,"roll":0.5,"pitch":-0.25,"yaw":3.0,
+      "rollspeed":0.125,"pitchspeed":-0.0625,"yawspeed":1.5})"));
+}
+
+TEST(MavlinkSample, HighresImuIsSiWithMagInMicrotesla) {
+  const auto s = to_sample(make_message(kHighres, {.seq = 9}), nullptr);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->seq, 9u);
+  EXPECT_EQ(s->device_time_us, 1'700'000'123'456);
+  EXPECT_EQ(s->accel, (std::array<double, 3>{0.125, -0.5, -9.80665f}));
+  EXPECT_EQ(s->gyro, (std::array<double, 3>{0.01f, -0.02f, 0.5f}));
+  ASSERT_TRUE(s->has_mag);
+  EXPECT_EQ(s->mag, (std::array<double, 3>{25.0, -6.25, 50.0}));  // 0.25, -0.0625, 0.5 gauss
+  ASSERT_TRUE(s->has_temperature);
+  EXPECT_EQ(s->temperature_c, 31.5);
+  EXPECT_FALSE(s->has_raw);
+
+  HighresImu stale = kHighres;
+  stale.fields_updated = 0x003F;  // accelerometer and gyro fresh; magnetometer and temperature repeated
+  const auto t = to_sample(make_message(stale, {}), nullptr);
+  ASSERT_TRUE(t);
+  EXPECT_FALSE(t->has_mag);
+  EXPECT_EQ(t->mag, (std::array<double, 3>{}));
+  EXPECT_FALSE(t->has_temperature);
+}
+
+TEST(MavlinkSample, ScaledImuUnits) {
+  const ScaledImu m{.time_boot_ms = 1234,
+                    .xacc = 1000,
+                    .yacc = -500,
+                    .zacc = -1000,
+                    .xgyro = 1000,
+                    .ygyro = -250,
+                    .zgyro = 2,
+                    .xmag = 500,
+                    .ymag = -10,
+                    .zmag = 0,
+                    .temperature = 2512};
+  const auto s = to_sample(make_message(m, {}), nullptr);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->device_time_us, 1'234'000);
+  EXPECT_DOUBLE_EQ(s->accel[0], 9.80665);  // 1000 mG is one standard gravity
+  EXPECT_DOUBLE_EQ(s->accel[1], -9.80665 / 2);
+  EXPECT_DOUBLE_EQ(s->accel[2], -9.80665);
+  EXPECT_DOUBLE_EQ(s->gyro[0], 1.0);
+  EXPECT_DOUBLE_EQ(s->gyro[1], -0.25);
+  EXPECT_DOUBLE_EQ(s->gyro[2], 0.002);
+  EXPECT_TRUE(s->has_mag);
+  EXPECT_DOUBLE_EQ(s->mag[0], 50.0);  // 500 mgauss = 0.5 gauss = 50 uT
+  EXPECT_DOUBLE_EQ(s->mag[1], -1.0);
+  EXPECT_DOUBLE_EQ(s->mag[2], 0.0);
+  EXPECT_TRUE(s->has_temperature);
+  EXPECT_DOUBLE_EQ(s->temperature_c, 25.12);
+
+  ScaledImu no_temperature = m;
+  no_temperature.temperature = 0;  // MAVLink's "not provided"
+  EXPECT_FALSE(to_sample(make_message(no_temperature, {}), nullptr)->has_temperature);
+}
+
+TEST(MavlinkSample, RawImuGoesThroughTheCalibration) {
+  const Message m = make_message(kRaw, {.seq = 4});
+  EXPECT_EQ(to_sample(m, nullptr), std::nullopt);
+
+  Calibration c;
+  c.accel.scale = {0.5, 0.25, 2.0};
+  c.accel.offset = {50, 43, 27};
+  c.gyro.scale.fill(0.001);
+  c.mag.scale.fill(0.1);
+  const auto s = to_sample(m, &c);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->seq, 4u);
+  EXPECT_EQ(s->device_time_us, 987654321);
+  EXPECT_EQ(s->accel, (std::array<double, 3>{1000.0, 500.0, 3000.0}));  // scale * (raw - offset)
+  EXPECT_DOUBLE_EQ(s->gyro[2], 0.3);
+  EXPECT_DOUBLE_EQ(s->mag[2], -18.0);
+  EXPECT_TRUE(s->has_temperature);
+  EXPECT_DOUBLE_EQ(s->temperature_c, -15.5);  // RAW_IMU's temperature is cdegC, whatever the calibration says
+  EXPECT_TRUE(s->has_raw);
+  EXPECT_EQ(s->raw, (std::array<std::int32_t, 10>{2050, 2043, 1527, -12, 5, 300, 210, -95, -180, -1550}));
+}
+
+TEST(MavlinkSample, OtherMessagesAreNotSamples) {
+  Calibration c;
+  EXPECT_EQ(to_sample(make_message(kAttitude, {}), &c), std::nullopt);
+  EXPECT_EQ(to_sample(decode_stream(heartbeat(0)).messages.at(0), &c), std::nullopt);
+}
+
+}  // namespace
+}  // namespace imubridge::protocol::mavlink
