@@ -1,0 +1,47 @@
+#include "sim/scenario.hpp"
+
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "sim/effects.hpp"
+
+namespace imubridge::sim {
+
+namespace {
+
+constexpr std::array<std::string_view, 3> kNames{"paper", "center", "hover"};
+
+}  // namespace
+
+std::span<const std::string_view> scenario_names() { return kNames; }
+
+SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional<double> duration_s,
+                        std::span<const std::string> effects) {
+  SimConfig config;
+  config.seed = seed;
+  config.flight.air.quadratic_drag_per_m = kPaperMu;
+  if (name == "paper") {
+    config.imu.pose = ImuPose::paper(kPaperR, kPaperBeta, kPaperAlpha);
+  } else if (name == "center") {
+    // Defaults already: IMU at the mass centre, axes aligned.
+  } else if (name == "hover") {
+    config.flight.manoeuvres.enabled = false;
+    config.duration_s = 10.0;
+  } else {
+    std::string valid;
+    for (std::string_view n : kNames) valid += " " + std::string(n);
+    throw std::invalid_argument("unknown scenario \"" + std::string(name) + "\"; valid scenarios:" + valid);
+  }
+  if (duration_s) {
+    if (!std::isfinite(*duration_s) || *duration_s <= 0.0) {
+      throw std::invalid_argument("scenario duration must be positive and finite, got " + std::to_string(*duration_s));
+    }
+    config.duration_s = *duration_s;
+  }
+  for (const std::string& effect : effects) apply_effect(config, effect);
+  return config;
+}
+
+}  // namespace imubridge::sim

@@ -1,0 +1,31 @@
+#pragma once
+// Named scenarios. A scenario is fully determined by (name, seed, duration, effects).
+//   paper  - the paper's experiment (section VII): IMU far from the mass centre with the identified
+//            (r, beta, alpha, mu), agile pitch and some roll manoeuvres, 60 s at 200 Hz.
+//   center - the same flight with the IMU at the mass centre, axes aligned (the paper's section VIII).
+//   hover  - no manoeuvres, IMU at the mass centre, the paper's drag, 10 s.
+#include <cstdint>
+#include <numbers>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "sim/simulator.hpp"
+
+namespace imubridge::sim {
+
+// The paper's identified parameters (r, beta, alpha, mu) = (0.179 m, 85.12 deg, -0.3 deg, 0.0386 1/m).
+inline constexpr double kPaperR = 0.179;
+inline constexpr double kPaperBeta = 85.12 * std::numbers::pi / 180;
+inline constexpr double kPaperAlpha = -0.3 * std::numbers::pi / 180;
+inline constexpr double kPaperMu = 0.0386;
+
+std::span<const std::string_view> scenario_names();
+
+// Throws std::invalid_argument for an unknown name (listing the valid ones), a duration that is not positive and
+// finite, or a bad effect (see effects.hpp). Without a duration the scenario's own is used.
+SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional<double> duration_s = std::nullopt,
+                        std::span<const std::string> effects = {});
+
+}  // namespace imubridge::sim
