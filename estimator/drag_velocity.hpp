@@ -1,0 +1,91 @@
+#pragma once
+// Drag-velocity estimator, the paper's section VIII done properly: the body-frame horizontal velocity from the drag
+// that the lever-arm-compensated horizontal accelerometers measure, fused in a 6-state extended Kalman filter with
+// the gyro-propagated gravity direction. State and noise design: docs/estimator.md.
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <optional>
+
+#include "estimator/constants.hpp"
+#include "estimator/differentiator.hpp"
+#include "estimator/full_model.hpp"
+#include "estimator/imu_series.hpp"
+#include "estimator/lever_arm_compensation.hpp"
+
+namespace imubridge::estimator {
+
+struct DragVelocityConfig {
+  int differentiator_window = 5;        // samples in the causal omega_dot fit (odd); the output lags by (N-1)/2
+  double max_gap = 0.1;                 // s; a longer silence restarts the differentiator
+  double accel_noise = 0.1;             // m/s^2, std of one compensated horizontal specific-force sample
+  double accel_process_noise = 0.5;     // m/s^2/sqrt(Hz): unmodelled horizontal acceleration (gusts, model error)
+  double gyro_noise = 1e-3;             // rad/s/sqrt(Hz), gyro white-noise density
+  double gyro_bias_walk = 1e-4;         // rad/s^2/sqrt(Hz), gyro bias random walk
+  double initial_velocity_std = 1.0;    // m/s
+  double initial_tilt_std = 0.1;        // of the body x, y components of the gravity direction (~rad)
+  double initial_gyro_bias_std = 0.02;  // rad/s
+  // Beyond any MEMS full scale: a sample outside is corrupt, and one would wreck the filter's state.
+  double max_specific_force = 16.0 * kGravity;  // m/s^2, per axis
+  double max_rate = 35.0;                       // rad/s (2000 deg/s), per axis
+};
+
+struct DragVelocityEstimate {
+  double t = 0.0;                                       // s: the sample this describes, delay_samples() back
+  Eigen::Vector2d f = Eigen::Vector2d::Zero();          // compensated horizontal specific force (the drag), m/s^2
+  Eigen::Vector2d f_var = Eigen::Vector2d::Zero();      // its variance, (m/s^2)^2
+  Eigen::Vector2d v_raw = Eigen::Vector2d::Zero();      // the drag law inverted, sample by sample, m/s
+  Eigen::Vector2d v_raw_var = Eigen::Vector2d::Zero();  // (m/s)^2
+  Eigen::Vector2d v = Eigen::Vector2d::Zero();          // filtered body-frame horizontal velocity, m/s
+  Eigen::Vector2d v_var = Eigen::Vector2d::Zero();      // (m/s)^2
+  Eigen::Vector2d gyro_bias = Eigen::Vector2d::Zero();  // estimated body x, y gyro bias, rad/s
+};
+
+struct DragVelocityCounters {
+  std::uint64_t samples_in = 0;
+  std::uint64_t estimates_out = 0;
+  std::uint64_t rejected_non_finite = 0;
+  std::uint64_t rejected_out_of_range = 0;  // beyond max_specific_force or max_rate
+  std::uint64_t rejected_time = 0;          // timestamp not after the previous accepted sample's
+  std::uint64_t gaps = 0;                   // restarts after more than max_gap without samples
+};
+
+class DragVelocityEstimator {
+ public:
+  // Throws std::invalid_argument for invalid params, an axis without drag (nothing to invert) or a bad config.
+  DragVelocityEstimator(const FullModelParams& params, const DragVelocityConfig& config);
+
+  // O(1) work and no allocation. Returns the estimate for the sample delay_samples() back once the differentiator
+  // window is full. A rejected sample is counted and leaves the estimator exactly as it was.
+  std::optional<DragVelocityEstimate> update(const ImuSample& sample);
+
+  const DragVelocityCounters& counters() const { return counters_; }
+  int delay_samples() const { return differentiator_.delay_samples(); }
+
+ private:
+  using Vector6d = Eigen::Matrix<double, 6, 1>;
+  using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+  void predict(double dt, const Eigen::Vector3d& w_measured);
+  void fuse_velocity(int axis, double v_measured);
+
+  FullModelParams params_;
+  DragVelocityConfig config_;
+  LeverArmCompensator compensator_;
+  CausalDifferentiator differentiator_;
+  // The last samples, so the accelerometer and gyro are read at the differentiator window's centre: the time its
+  // omega_dot belongs to.
+  std::array<ImuSample, CausalDifferentiator::kMaxWindow> history_{};
+  int head_ = 0;
+  std::optional<double> last_input_t_;
+
+  // x = (v_x, v_y, gamma_x, gamma_y, b_x, b_y): body velocity, body x, y of the gravity direction, gyro bias.
+  Vector6d x_ = Vector6d::Zero();
+  Matrix6d p_ = Matrix6d::Zero();
+  Vector6d process_density_ = Vector6d::Zero();  // continuous-time process noise, per unit time
+  std::optional<double> filter_t_;
+
+  DragVelocityCounters counters_;
+};
+
+}  // namespace imubridge::estimator

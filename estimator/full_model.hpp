@@ -1,0 +1,68 @@
+#pragma once
+// The 3-D accelerometer model of docs/model.md:
+//   f_imu = R_sb (f_cm + w_dot x r + w x (w x r)) + b_a,   f_cm = (drag_x(v_x), drag_y(v_y), -T),   w = R_bs w_imu
+// R_bs = Exp(mounting) turns IMU axes into body axes and R_sb = R_bs^T. The paper's alpha about y_b is
+// mounting = (0, alpha, 0): the sensor's x axis is then (cos alpha, 0, -sin alpha) in body axes.
+#include <ceres/rotation.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>  // cross()
+#include <optional>
+#include <string>
+
+#include "estimator/drag_law.hpp"
+
+namespace imubridge::estimator {
+
+// The defaults disable compensation: IMU at the mass centre, aligned with the body, no drag, no bias.
+struct FullModelParams {
+  Eigen::Vector3d lever_arm = Eigen::Vector3d::Zero();       // r: IMU position from the mass centre, body axes, m
+  Eigen::Vector3d mounting = Eigen::Vector3d::Zero();        // rotation vector of R_bs (IMU -> body), rad
+  Eigen::Vector2d drag_linear = Eigen::Vector2d::Zero();     // k_x, k_y, 1/s
+  Eigen::Vector2d drag_quadratic = Eigen::Vector2d::Zero();  // mu_x, mu_y, 1/m
+  Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero();      // b_a, IMU axes, m/s^2
+
+  friend bool operator==(const FullModelParams&, const FullModelParams&) = default;
+};
+
+// Why `p` is unusable (a non-finite value, a negative drag coefficient), or nullopt.
+std::optional<std::string> validate(const FullModelParams& p);
+
+// The per-sample signals of the model; none depends on the parameters.
+struct FullModelInput {
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();       // w_imu, rad/s, IMU axes
+  Eigen::Vector3d gyro_rate = Eigen::Vector3d::Zero();  // w_dot_imu, rad/s^2, IMU axes
+  Eigen::Vector2d velocity = Eigen::Vector2d::Zero();   // (v_x, v_y): body-axis horizontal air velocity, m/s
+  double thrust = 0.0;                                  // T, m/s^2 (g under the paper's assumption)
+};
+
+// The predicted IMU specific force. The parameters come as separate raw blocks (3, 3, 2, 2, 3 values), the layout of
+// Ceres parameter blocks, so an identification can hold any group constant. T is double or a ceres::Jet.
+template <typename T>
+Eigen::Matrix<T, 3, 1> predict_specific_force(const T* lever_arm, const T* mounting, const T* drag_linear,
+                                              const T* drag_quadratic, const T* accel_bias, const FullModelInput& in) {
+  using Vec3 = Eigen::Matrix<T, 3, 1>;
+  const Eigen::Map<const Vec3> r(lever_arm);
+  const Vec3 w_imu = in.gyro.cast<T>();
+  const Vec3 w_dot_imu = in.gyro_rate.cast<T>();
+  Vec3 w;
+  Vec3 w_dot;
+  ceres::AngleAxisRotatePoint(mounting, w_imu.data(), w.data());
+  ceres::AngleAxisRotatePoint(mounting, w_dot_imu.data(), w_dot.data());
+
+  const Vec3 f_cm(drag_specific_force(drag_linear[0], drag_quadratic[0], in.velocity.x()),
+                  drag_specific_force(drag_linear[1], drag_quadratic[1], in.velocity.y()), T(-in.thrust));
+  const Vec3 f_body = f_cm + w_dot.cross(r) + w.cross(w.cross(r));
+
+  const T body_to_imu[3] = {-mounting[0], -mounting[1], -mounting[2]};
+  Vec3 f_imu;
+  ceres::AngleAxisRotatePoint(body_to_imu, f_body.data(), f_imu.data());
+  return f_imu + Eigen::Map<const Vec3>(accel_bias);
+}
+
+inline Eigen::Vector3d predict_specific_force(const FullModelParams& p, const FullModelInput& in) {
+  return predict_specific_force(p.lever_arm.data(), p.mounting.data(), p.drag_linear.data(), p.drag_quadratic.data(),
+                                p.accel_bias.data(), in);
+}
+
+}  // namespace imubridge::estimator

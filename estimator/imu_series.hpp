@@ -1,0 +1,40 @@
+#pragma once
+// The estimator's input: plain IMU time series in SI units, independent of the protocol and store layers.
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace imubridge::estimator {
+
+// One IMU measurement: what the live estimator consumes.
+struct ImuSample {
+  double t = 0.0;                                   // s
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();   // angular rate, rad/s, IMU axes
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero();  // specific force, m/s^2, IMU axes
+};
+
+// Ground truth from a motion-capture system or a simulator, sample for sample with the IMU series.
+struct ReferenceSeries {
+  std::vector<Eigen::Vector3d> velocity_ned;  // mass-centre velocity, m/s, world NED
+  std::vector<Eigen::Quaterniond> attitude;   // body -> NED rotation (v_ned = q * v_body)
+};
+
+struct ImuSeries {
+  std::vector<double> t;                     // s, strictly increasing
+  std::vector<Eigen::Vector3d> gyro;         // rad/s, IMU axes
+  std::vector<Eigen::Vector3d> accel;        // m/s^2, IMU axes
+  std::optional<ReferenceSeries> reference;  // same length as t when present
+
+  std::size_t size() const { return t.size(); }
+  ImuSample sample(std::size_t i) const { return {t[i], gyro[i], accel[i]}; }
+};
+
+// Why `series` cannot be used (mismatched lengths, non-finite values, times not strictly increasing, attitude not
+// a unit quaternion), or nullopt when it can. The batch functions throw std::invalid_argument with this message.
+std::optional<std::string> validate(const ImuSeries& series);
+void require_valid(const ImuSeries& series);
+
+}  // namespace imubridge::estimator
