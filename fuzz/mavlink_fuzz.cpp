@@ -1,37 +1,26 @@
 // libFuzzer target for the MAVLink decoder. Input: two bytes that choose a split point, then the byte stream.
-// Checks: the stream decoded whole and in two pieces gives the same messages and counters; every byte is in an
-// emitted frame or counted as discarded; the messages, encoded again, decode back to themselves; typed fields
+// Checks: the stream decoded whole and in two pieces, each through finish(), gives the same messages and counters;
+// every byte is in an emitted frame or counted as discarded; no component's message repeats the number of its previous
+// one (repeats are dropped as duplicates); the messages, encoded again, decode back to themselves; typed fields
 // re-encode to the payload bytes they came from; JSON and sample conversion take anything.
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <vector>
 
 #include "protocol/mavlink.hpp"
+#include "tests/decoder_harness.hpp"
 
 namespace mavlink = imubridge::protocol::mavlink;
+namespace harness = imubridge::protocol::harness;
 
 namespace {
 
 void require(bool condition) {
   if (!condition) std::abort();
-}
-
-struct Decoding {
-  std::vector<mavlink::Message> messages;
-  imubridge::protocol::DecoderCounters counters;
-};
-
-Decoding decode_in_two(std::span<const std::uint8_t> stream, std::size_t split) {
-  mavlink::Decoder decoder;
-  Decoding d;
-  decoder.feed(stream.first(split), d.messages);
-  decoder.feed(stream.subspan(split), d.messages);
-  decoder.finish(d.messages);
-  d.counters = decoder.counters();
-  return d;
 }
 
 }  // namespace
@@ -41,21 +30,28 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::span<const std::uint8_t> stream(data + 2, size - 2);
   const std::size_t split = (data[0] | data[1] << 8) % (stream.size() + 1);
 
-  const Decoding whole = decode_in_two(stream, stream.size());
-  const Decoding parts = decode_in_two(stream, split);
-  require(parts.messages == whole.messages);
+  const auto whole = harness::decode_pieces(mavlink::Decoder{}, {stream});
+  const auto parts = harness::decode_split(mavlink::Decoder{}, stream, split);
+  require(parts.frames == whole.frames);
   require(parts.counters == whole.counters);
 
   std::vector<std::uint8_t> again;
-  for (const mavlink::Message& m : whole.messages) mavlink::encode(m, again);
+  for (const mavlink::Message& m : whole.frames) mavlink::encode(m, again);
   const auto& c = whole.counters;
   require(c.bytes_in == stream.size());
-  require(c.frames_out == whole.messages.size());
+  require(c.frames_out == whole.frames.size());
   require(c.bytes_in == again.size() + c.bytes_discarded);
-  require(decode_in_two(again, again.size()).messages == whole.messages);
+  require(harness::decode_pieces(mavlink::Decoder{}, {again}).frames == whole.frames);
+
+  std::map<int, int> last_seq;  // by sysid << 8 | compid
+  for (const mavlink::Message& m : whole.frames) {
+    const auto [last, first] = last_seq.try_emplace(m.sysid << 8 | m.compid, m.seq);
+    require(first || last->second != m.seq);
+    last->second = m.seq;
+  }
 
   static const auto calibration = imubridge::protocol::Calibration::reference_board();
-  for (const mavlink::Message& m : whole.messages) {
+  for (const mavlink::Message& m : whole.frames) {
     if (const auto typed = mavlink::decode(m)) {
       const std::vector<std::uint8_t> payload = mavlink::encode_payload(*typed);
       require(std::equal(payload.begin(), payload.end(), m.payload.begin()));

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "protocol/units.hpp"
+
 namespace imubridge::protocol {
 namespace {
 
@@ -49,15 +51,14 @@ bool Calibration::valid() const {
 }
 
 Calibration Calibration::reference_board() {
-  constexpr double kG = 9.80665;
   Calibration c;
   // ADXL327: 420 mV/g at a 3.3 V supply, 0 g at mid-supply, read by a 12-bit ADC referenced to the same 3.3 V.
-  c.accel.scale.fill(kG * 3.3 / (0.42 * 4096));
+  c.accel.scale.fill(kStandardGravity * 3.3 / (0.42 * 4096));
   c.accel.offset.fill(2048);
   // ITG3200: 14.375 LSB per deg/s.
   c.gyro.scale.fill(std::numbers::pi / 180 / 14.375);
-  // HMC5843: 1300 counts per gauss (its default gain); 1 gauss = 100 uT.
-  c.mag.scale.fill(100.0 / 1300.0);
+  // HMC5843: 1300 counts per gauss (its default gain).
+  c.mag.scale.fill(kMicroteslaPerGauss / 1300);
   // ITG3200 temperature sensor: -13200 counts at 35 C, 280 counts per C.
   c.temperature_scale = 1.0 / 280;
   c.temperature_offset_c = 35 + 13200.0 / 280;

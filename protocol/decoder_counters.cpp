@@ -12,15 +12,16 @@ DecoderCounters& DecoderCounters::operator+=(const DecoderCounters& other) {
   bytes_discarded += other.bytes_discarded;
   sequence_gaps += other.sequence_gaps;
   frames_lost += other.frames_lost;
+  duplicates += other.duplicates;
   unsupported += other.unsupported;
   return *this;
 }
 
 void to_json(nlohmann::json& j, const DecoderCounters& c) {
-  j = nlohmann::json{{"bytes_in", c.bytes_in},           {"frames_out", c.frames_out},
-                     {"crc_failures", c.crc_failures},   {"resyncs", c.resyncs},
-                     {"bytes_discarded", c.bytes_discarded}, {"sequence_gaps", c.sequence_gaps},
-                     {"frames_lost", c.frames_lost},     {"unsupported", c.unsupported}};
+  j = nlohmann::json{
+      {"bytes_in", c.bytes_in},       {"frames_out", c.frames_out},           {"crc_failures", c.crc_failures},
+      {"resyncs", c.resyncs},         {"bytes_discarded", c.bytes_discarded}, {"sequence_gaps", c.sequence_gaps},
+      {"frames_lost", c.frames_lost}, {"duplicates", c.duplicates},           {"unsupported", c.unsupported}};
 }
 
 }  // namespace imubridge::protocol

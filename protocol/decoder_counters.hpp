@@ -1,8 +1,9 @@
 #pragma once
-// What every streaming decoder counts. Nothing a decoder drops goes uncounted: every byte it was given ends up
-// either inside a decoded frame or in bytes_discarded (or is still buffered, waiting for the rest of a frame).
+// What every streaming decoder counts (docs/protocol.md, "Counters"). Nothing a decoder drops goes uncounted: every
+// byte it was given ends up either inside an emitted frame or in bytes_discarded (or is still buffered, waiting for
+// the rest of a frame, until finish()).
+#include <concepts>
 #include <cstdint>
-
 #include <nlohmann/json_fwd.hpp>
 
 namespace imubridge::protocol {
@@ -11,10 +12,11 @@ struct DecoderCounters {
   std::uint64_t bytes_in = 0;         // bytes given to feed()
   std::uint64_t frames_out = 0;       // frames that passed every check and were emitted
   std::uint64_t crc_failures = 0;     // candidates rejected by their CRC / checksum
-  std::uint64_t resyncs = 0;          // false starts of any kind (bad CRC, bad length, bad escape, bad version)
+  std::uint64_t resyncs = 0;          // false starts of any kind (bad CRC, length, escape, version; cut off at the end)
   std::uint64_t bytes_discarded = 0;  // bytes that belong to no emitted frame
   std::uint64_t sequence_gaps = 0;    // times the sequence number jumped (one gap may hide many frames)
   std::uint64_t frames_lost = 0;      // frames missing according to the sequence numbers
+  std::uint64_t duplicates = 0;       // valid frames dropped for repeating the sequence number just before them
   std::uint64_t unsupported = 0;      // valid frames of a type this decoder does not interpret (counted, not errors)
 
   DecoderCounters& operator+=(const DecoderCounters& other);
@@ -22,5 +24,19 @@ struct DecoderCounters {
 };
 
 void to_json(nlohmann::json& j, const DecoderCounters& c);
+
+// Counts the step from a sender's previous sequence number to `seq`, both mod 2^bits: 1 is the next frame, k > 1 a
+// gap of k - 1 lost frames, and 0 the same number again: a retransmission, which the caller drops. Returns the step.
+template <std::unsigned_integral Seq>
+Seq count_sequence_step(Seq previous, Seq seq, DecoderCounters& counters) {
+  const auto step = static_cast<Seq>(seq - previous);
+  if (step == 0) {
+    ++counters.duplicates;
+  } else if (step > 1) {
+    ++counters.sequence_gaps;
+    counters.frames_lost += step - 1u;
+  }
+  return step;
+}
 
 }  // namespace imubridge::protocol

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "protocol/decoder_counters.hpp"
+#include "protocol/stream_scanner.hpp"
 
 namespace imubridge::protocol::imu {
 
@@ -51,27 +52,32 @@ std::size_t encoded_size(const Frame& frame);
 void encode(const Frame& frame, std::vector<std::uint8_t>& out);
 
 // Streaming decoder for one sender's byte stream. Frames come out in stream order whatever the chunking; a
-// candidate whose version, length or CRC is wrong is a false start and the search resumes at the byte after
-// its first sync byte, so a frame hidden inside rejected bytes is still found.
+// candidate whose version, length or CRC is wrong is a false start and the search resumes at the byte after its
+// first sync byte, so a frame hidden inside rejected bytes is still found (protocol/stream_scanner.hpp). A frame
+// that repeats the sequence number of the one before it is a retransmission and is dropped, so no two emitted frames
+// share a Frame::sequence.
 class Decoder {
  public:
   // Accepts any chunking (1 byte .. 64 KiB); appends every complete valid frame to `out`.
   void feed(std::span<const std::uint8_t> chunk, std::vector<Frame>& out);
-  // End of stream: bytes still buffered (a truncated last frame) are counted as discarded.
-  void finish();
-  const DecoderCounters& counters() const { return counters_; }
+  // End of stream: appends the frames still to be found in the buffered bytes, and counts the rest as discarded.
+  void finish(std::vector<Frame>& out);
+  const DecoderCounters& counters() const { return scanner_.counters(); }
 
  private:
-  // Decodes what `data` decides; returns how many leading bytes it consumed. The rest is the start of a
-  // candidate that needs more bytes before it can be accepted or rejected.
-  std::size_t scan(std::span<const std::uint8_t> data, std::vector<Frame>& out);
-  // Unwraps `seq` into the running sequence and counts any gap; returns the unwrapped number.
-  std::uint64_t track(std::uint16_t seq);
+  // What is particular to imubridge frames; the rest of decoding is StreamScanner's.
+  struct Framing {
+    using Finder = StartFinder<kSync0>;
+    static constexpr std::size_t kMaxCandidate = kMaxFrameSize;
 
-  DecoderCounters counters_;
-  std::vector<std::uint8_t> pending_;  // an undecided candidate carried over from the previous chunk
-  bool have_seq_ = false;
-  std::uint64_t sequence_ = 0;
+    Judgement judge(std::span<const std::uint8_t> candidate, bool at_end) const;
+    bool take(std::span<const std::uint8_t> frame, std::vector<Frame>& out, DecoderCounters& counters);
+
+    bool have_seq = false;
+    std::uint64_t sequence = 0;  // the last frame's, unwrapped
+  };
+
+  StreamScanner<Framing> scanner_;
 };
 
 // {"protocol":"imubridge","seq":..,"sequence":..,"type":"imu_sample","device_time_us":..,

@@ -1,13 +1,15 @@
 #include "protocol/mavlink.hpp"
 
 #include <algorithm>
-#include <cstring>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
 #include <utility>
 
+#include "protocol/byte_order.hpp"
 #include "protocol/crc.hpp"
+#include "protocol/hex.hpp"
+#include "protocol/units.hpp"
 
 namespace imubridge::protocol::mavlink {
 namespace {
@@ -28,59 +30,8 @@ struct Header {
   std::size_t frame_size() const { return size + len + kCrcSize + (is_signed() ? kSignatureSize : 0); }
 };
 
-enum class Verdict { need_more, frame, truncated, bad_flags, bad_crc, no_stx_after };
-
-struct Judgement {
-  Verdict verdict;
-  Header header{};
-};
-
-// Judges the candidate at p[0] (an STX) from the `avail` bytes there. Each verdict depends on those bytes and on
-// `at_end` only, so the chunking of the stream cannot change it.
-Judgement judge(const std::uint8_t* p, std::size_t avail, bool at_end) {
-  const Verdict short_of_bytes = at_end ? Verdict::truncated : Verdict::need_more;
-  if (avail < (p[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {short_of_bytes};
-  const Header h = Header::read(p);
-  if (h.incompat_flags & ~kIncompatSigned) return {Verdict::bad_flags};  // a feature we cannot parse
-  const std::size_t size = h.frame_size();
-  const std::optional<std::uint8_t> extra = crc_extra(h.msgid);
-  if (!extra) {
-    // Without a CRC_EXTRA nothing can be checked: trust the length only if the next frame starts right after it.
-    if (avail > size) return {is_stx(p[size]) ? Verdict::frame : Verdict::no_stx_after, h};
-    return {avail == size && at_end ? Verdict::frame : short_of_bytes, h};
-  }
-  if (avail < size) return {short_of_bytes};
-  const std::size_t crc_at = h.size + h.len;
-  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast({p + 1, crc_at - 1}), *extra);
-  return {crc == (p[crc_at] | p[crc_at + 1] << 8) ? Verdict::frame : Verdict::bad_crc, h};
-}
-
-// The next byte that may start a frame. memchr looks for one value and MAVLink has two STX values, so each is
-// searched for on its own and its hit remembered until passed: every byte is looked at once per value.
-class StxFinder {
- public:
-  StxFinder(const std::uint8_t* begin, const std::uint8_t* end)
-      : end_(end), v1_(find(begin, kStxV1)), v2_(find(begin, kStxV2)) {}
-
-  const std::uint8_t* next(const std::uint8_t* from) {
-    if (v1_ < from) v1_ = find(from, kStxV1);
-    if (v2_ < from) v2_ = find(from, kStxV2);
-    return std::min(v1_, v2_);
-  }
-
- private:
-  const std::uint8_t* find(const std::uint8_t* from, std::uint8_t stx) const {
-    const void* hit = std::memchr(from, stx, static_cast<std::size_t>(end_ - from));
-    return hit ? static_cast<const std::uint8_t*>(hit) : end_;
-  }
-
-  const std::uint8_t* end_;
-  const std::uint8_t* v1_;
-  const std::uint8_t* v2_;
-};
-
 // Fills `m` from a frame that passed judge().
-const Message& read_message(const std::uint8_t* frame, const Header& h, Message& m) {
+void read_message(const std::uint8_t* frame, const Header& h, Message& m) {
   m.version = h.version;
   m.seq = h.seq;
   m.sysid = h.sysid;
@@ -89,19 +40,8 @@ const Message& read_message(const std::uint8_t* frame, const Header& h, Message&
   m.len = h.len;
   std::copy_n(frame + h.size, h.len, m.payload.begin());
   m.signed_ = h.is_signed();
-  return m;
 }
 
-std::string hex(std::span<const std::uint8_t> bytes) {
-  static constexpr char kDigits[] = "0123456789ABCDEF";
-  std::string text;
-  text.reserve(2 * bytes.size());
-  for (std::uint8_t b : bytes) text += {kDigits[b >> 4], kDigits[b & 0xF]};
-  return text;
-}
-
-constexpr double kStandardGravity = 9.80665;  // m/s^2 per g: MAVLink's mG are thousandths of it
-constexpr double kMicroteslaPerGauss = 100.0;
 constexpr std::uint16_t kHighresMagUpdated = 0x1C0;  // HIGHRES_IMU_UPDATED_XMAG | YMAG | ZMAG
 constexpr std::uint16_t kHighresTemperatureUpdated = 0x1000;
 
@@ -127,6 +67,7 @@ Sample sample_of(const HighresImu& m) {
 Sample sample_of(const ScaledImu& m) {
   Sample s;
   s.device_time_us = std::int64_t{m.time_boot_ms} * 1000;
+  // mG are thousandths of standard gravity.
   s.accel = {m.xacc * kStandardGravity / 1000, m.yacc * kStandardGravity / 1000, m.zacc * kStandardGravity / 1000};
   s.gyro = {m.xgyro / 1000.0, m.ygyro / 1000.0, m.zgyro / 1000.0};
   s.mag = {m.xmag * kMicroteslaPerGauss / 1000, m.ymag * kMicroteslaPerGauss / 1000,
@@ -181,85 +122,45 @@ void encode(const Message& m, std::vector<std::uint8_t>& out) {
     out.insert(out.end(), {kStxV2, m.len, incompat_flags, 0, m.seq, m.sysid, m.compid, id(0), id(1), id(2)});
   }
   out.insert(out.end(), m.payload.begin(), m.payload.begin() + m.len);
-  const std::uint16_t crc =
-      crc16_mcrf4xx_update(crc16_mcrf4xx_fast(std::span(out).subspan(start + 1)), crc_extra(m.msgid).value_or(0));
-  out.insert(out.end(), {static_cast<std::uint8_t>(crc), static_cast<std::uint8_t>(crc >> 8)});
+  append_le(
+      out, crc16_mcrf4xx_update(crc16_mcrf4xx_fast(std::span(out).subspan(start + 1)), crc_extra(m.msgid).value_or(0)));
   if (m.signed_) out.insert(out.end(), kSignatureSize, 0);
 }
 
-void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Message>& out) {
-  counters_.bytes_in += chunk.size();
-  if (!pending_.empty()) {
-    // kMaxFrameSize + 1 more bytes decide any carried-over candidate (an unknown id looks one byte past its end),
-    // so only that much of the chunk is copied; the rest is scanned where it lies.
-    const std::size_t carried = pending_.size();
-    const std::size_t take = std::min(chunk.size(), kMaxFrameSize + 1);
-    pending_.insert(pending_.end(), chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(take));
-    const std::size_t used = scan(pending_, false, out);
-    if (used < carried) {  // still undecided, which means the whole chunk is now in pending_
-      pending_.erase(pending_.begin(), pending_.begin() + static_cast<std::ptrdiff_t>(used));
-      return;
-    }
-    pending_.clear();
-    chunk = chunk.subspan(used - carried);
+void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Message>& out) { scanner_.feed(chunk, out); }
+
+void Decoder::finish(std::vector<Message>& out) { scanner_.finish(out); }
+
+// Each verdict depends on the candidate's bytes and on `at_end` only, so the chunking of the stream cannot change it.
+inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool at_end) const {
+  if (c.size() < (c[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {Verdict::need_more};
+  const Header h = Header::read(c.data());
+  if (h.incompat_flags & ~kIncompatSigned) return {Verdict::false_start};  // a feature we cannot parse
+  const std::size_t size = h.frame_size();
+  const std::optional<std::uint8_t> extra = crc_extra(h.msgid);
+  if (!extra) {
+    // Without a CRC_EXTRA nothing can be checked: trust the length only if the next frame starts right after it.
+    if (c.size() > size) return {is_stx(c[size]) ? Verdict::frame : Verdict::false_start, size};
+    return {c.size() == size && at_end ? Verdict::frame : Verdict::need_more, size};
   }
-  const std::size_t used = scan(chunk, false, out);
-  pending_.assign(chunk.begin() + static_cast<std::ptrdiff_t>(used), chunk.end());
+  if (c.size() < size) return {Verdict::need_more};
+  const std::size_t crc_at = h.size + h.len;
+  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast(c.subspan(1, crc_at - 1)), *extra);
+  return {crc == load_le<std::uint16_t>(&c[crc_at]) ? Verdict::frame : Verdict::bad_crc, size};
 }
 
-void Decoder::finish(std::vector<Message>& out) {
-  scan(pending_, true, out);
-  pending_.clear();
-}
-
-std::size_t Decoder::scan(std::span<const std::uint8_t> data, bool at_end, std::vector<Message>& out) {
-  const std::uint8_t* const begin = data.data();
-  const std::uint8_t* const end = begin + data.size();
-  StxFinder stx(begin, end);
-  const std::uint8_t* p = begin;
-  while (p < end) {
-    const std::uint8_t* candidate = stx.next(p);
-    counters_.bytes_discarded += static_cast<std::size_t>(candidate - p);
-    p = candidate;
-    if (p == end) break;
-
-    const auto [verdict, header] = judge(p, static_cast<std::size_t>(end - p), at_end);
-    switch (verdict) {
-      case Verdict::need_more:
-        return static_cast<std::size_t>(p - begin);
-      case Verdict::frame:
-        count(read_message(p, header, out.emplace_back()));
-        p += header.frame_size();
-        break;
-      case Verdict::bad_crc:
-        ++counters_.crc_failures;
-        [[fallthrough]];
-      case Verdict::truncated:
-      case Verdict::bad_flags:
-      case Verdict::no_stx_after:
-        // A false start: only its STX is dropped, so a frame that begins inside the rejected bytes is still found.
-        ++counters_.resyncs;
-        ++counters_.bytes_discarded;
-        ++p;
-        break;
-    }
+inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<Message>& out,
+                                   DecoderCounters& counters) {
+  const Header h = Header::read(f.data());
+  // Each component numbers its own frames, mod 256.
+  const auto [last, first] = last_seq.try_emplace(static_cast<std::uint16_t>(h.sysid << 8 | h.compid), h.seq);
+  if (!first) {
+    if (count_sequence_step(last->second, h.seq, counters) == 0) return false;  // sent again
+    last->second = h.seq;
   }
-  return data.size();
-}
-
-void Decoder::count(const Message& m) {
-  ++counters_.frames_out;
-  if (!is_decoded(m.msgid)) ++counters_.unsupported;
-  const auto [last, first] = last_seq_.try_emplace(static_cast<std::uint16_t>(m.sysid << 8 | m.compid), m.seq);
-  if (first) return;
-  // Each sender numbers its frames mod 256, so the frames skipped are the step minus one, mod 256; a repeated number
-  // reads as 255 lost, as in MAVLink's own drop counter.
-  const auto lost = static_cast<std::uint8_t>(m.seq - last->second - 1);
-  if (lost != 0) {
-    ++counters_.sequence_gaps;
-    counters_.frames_lost += lost;
-  }
-  last->second = m.seq;
+  if (!is_decoded(h.msgid)) ++counters.unsupported;
+  read_message(f.data(), h, out.emplace_back());
+  return true;
 }
 
 void to_json(nlohmann::json& j, const Message& m) {

@@ -1,6 +1,6 @@
 #pragma once
 // MAVLink v1 and v2 framing: a streaming decoder, an encoder, and the way from a message to the pipeline's Sample.
-// Framing, CRC_EXTRA, the rule for unknown ids, the resync rule and the counters: docs/protocol-mavlink.md.
+// Framing, CRC_EXTRA, the rule for unknown ids and the conversions: docs/protocol.md, section "MAVLink".
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -14,6 +14,7 @@
 #include "protocol/decoder_counters.hpp"
 #include "protocol/mavlink_messages.hpp"
 #include "protocol/sample.hpp"
+#include "protocol/stream_scanner.hpp"
 
 namespace imubridge::protocol::mavlink {
 
@@ -57,25 +58,29 @@ inline std::optional<Decoded> decode(const Message& m) {
 
 // Streaming decoder for one link: frames come out in stream order whatever the chunking. A candidate that fails
 // any check is a false start and the search resumes at the byte after its STX, so a frame that begins inside
-// rejected bytes is still found.
+// rejected bytes is still found (protocol/stream_scanner.hpp). A frame that repeats the sequence number of the one
+// before it from the same component is a retransmission and is dropped.
 class Decoder {
  public:
   void feed(std::span<const std::uint8_t> chunk, std::vector<Message>& out);
   // End of stream: a frame with an unknown id that ends exactly here is emitted; a cut-off candidate is a false
   // start, and the search goes on through the bytes after its STX.
   void finish(std::vector<Message>& out);
-  const DecoderCounters& counters() const { return counters_; }
+  const DecoderCounters& counters() const { return scanner_.counters(); }
 
  private:
-  // Decodes what `data` decides; returns how many leading bytes that used up. The rest starts a candidate that
-  // needs more bytes (none when `at_end`).
-  std::size_t scan(std::span<const std::uint8_t> data, bool at_end, std::vector<Message>& out);
-  // Counts an emitted frame, and any gap in its sender's sequence numbers.
-  void count(const Message& m);
+  // What is particular to MAVLink; the rest of decoding is StreamScanner's.
+  struct Framing {
+    using Finder = StartFinder<kStxV1, kStxV2>;
+    static constexpr std::size_t kMaxCandidate = kMaxFrameSize + 1;  // an unknown id looks one byte past its end
 
-  DecoderCounters counters_;
-  std::vector<std::uint8_t> pending_;                         // an undecided candidate carried over from feed to feed
-  std::unordered_map<std::uint16_t, std::uint8_t> last_seq_;  // by sysid << 8 | compid
+    Judgement judge(std::span<const std::uint8_t> candidate, bool at_end) const;
+    bool take(std::span<const std::uint8_t> frame, std::vector<Message>& out, DecoderCounters& counters);
+
+    std::unordered_map<std::uint16_t, std::uint8_t> last_seq;  // by sysid << 8 | compid
+  };
+
+  StreamScanner<Framing> scanner_;
 };
 
 // {"protocol":"mavlink","version":2,"seq":..,"sysid":..,"compid":..,"msgid":105,"len":63,"signed":false,

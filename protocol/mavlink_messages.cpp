@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <type_traits>
 #include <utility>
+
+#include "protocol/byte_order.hpp"
 
 namespace imubridge::protocol::mavlink {
 namespace {
@@ -48,25 +49,6 @@ constexpr CrcExtra kCrcExtras[] = {
     {12900, 114}, {12901, 254}, {12902, 140}, {12903, 249}, {12904, 77}, {12905, 49}, {12915, 94}, {12918, 139},
     {12919, 7},   {12920, 20}};
 static_assert(std::ranges::is_sorted(kCrcExtras, {}, &CrcExtra::msgid));
-
-// The same-size unsigned integer, to move any field through little-endian bytes.
-template <typename T>
-using Bits = std::conditional_t<sizeof(T) == 1, std::uint8_t,
-                                std::conditional_t<sizeof(T) == 2, std::uint16_t,
-                                                   std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>>>;
-
-template <typename T>
-T load_le(const std::uint8_t* p) {
-  Bits<T> bits = 0;
-  for (std::size_t i = 0; i < sizeof(T); ++i) bits |= static_cast<Bits<T>>(Bits<T>{p[i]} << (8 * i));
-  return std::bit_cast<T>(bits);
-}
-
-template <typename T>
-void store_le(T value, std::uint8_t* p) {
-  const auto bits = std::bit_cast<Bits<T>>(value);
-  for (std::size_t i = 0; i < sizeof(T); ++i) p[i] = static_cast<std::uint8_t>(bits >> (8 * i));
-}
 
 template <typename M>
 constexpr std::size_t fields_size() {
@@ -125,7 +107,7 @@ std::vector<std::uint8_t> encode_payload(const Decoded& message, bool extensions
         std::vector<std::uint8_t> out(M::kLength);
         std::size_t at = 0;
         M::for_each_field(m, [&](std::string_view, const auto& field) {
-          store_le(field, &out[at]);
+          store_le(&out[at], field);
           at += sizeof field;
         });
         out.resize(extensions ? M::kLength : M::kBaseLength);

@@ -1,6 +1,6 @@
 #pragma once
 // The MAVLink messages imubridge reads, as common.xml defines them, and the CRC_EXTRA of every common.xml message.
-// Payload layouts only: framing is protocol/mavlink.hpp. Units and conversion to samples: docs/protocol-mavlink.md.
+// Payload layouts only: framing is protocol/mavlink.hpp. Units and conversion to samples: docs/protocol.md.
 #include <cstddef>
 #include <cstdint>
 #include <optional>

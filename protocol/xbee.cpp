@@ -1,11 +1,13 @@
 #include "protocol/xbee.hpp"
 
 #include <algorithm>
-#include <cstring>
 #include <nlohmann/json.hpp>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <string>
+
+#include "protocol/hex.hpp"
 
 namespace imubridge::protocol::xbee {
 namespace {
@@ -112,24 +114,6 @@ Frame parse_frame_data(std::span<const std::uint8_t> data) {
   return {type, OtherFrame{{in.begin(), in.end()}}};
 }
 
-void append_hex(std::string& s, std::uint8_t byte) {
-  static constexpr char kDigits[] = "0123456789ABCDEF";
-  s += kDigits[byte >> 4];
-  s += kDigits[byte & 0xF];
-}
-
-std::string hex(std::span<const std::uint8_t> bytes) {
-  std::string s;
-  for (std::uint8_t b : bytes) append_hex(s, b);
-  return s;
-}
-
-std::string hex_be(std::uint64_t value, std::size_t bytes) {
-  std::string s;
-  for (std::size_t i = bytes; i-- > 0;) append_hex(s, static_cast<std::uint8_t>(value >> (8 * i)));
-  return s;
-}
-
 }  // namespace
 
 std::uint8_t checksum(std::span<const std::uint8_t> frame_data) noexcept {
@@ -153,105 +137,77 @@ void encode(const Frame& frame, ApiMode mode, std::vector<std::uint8_t>& out) {
   put(checksum(data));
 }
 
-void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Frame>& out) {
-  counters_.bytes_in += chunk.size();
-  buf_.insert(buf_.end(), chunk.begin(), chunk.end());
-  std::size_t head = 0;  // buf_[0, head) is resolved: part of an emitted frame or counted as discarded
-  for (;;) {
-    if (!in_frame_) {
-      const void* found = head < buf_.size() ? std::memchr(&buf_[head], kStartDelimiter, buf_.size() - head) : nullptr;
-      const std::size_t start = found ? static_cast<const std::uint8_t*>(found) - buf_.data() : buf_.size();
-      counters_.bytes_discarded += start - head;
-      head = start;
-      if (head == buf_.size()) break;
-      in_frame_ = true;
-      scanned_ = head + 1;
-      escape_pending_ = false;
-      expected_ = 0;
-      body_.clear();
-    }
-    const Step step = scan();
-    if (step == Step::need_more) break;
-    in_frame_ = false;
-    if (step == Step::complete) {
-      out.push_back(parse_frame_data(candidate_data()));
-      ++counters_.frames_out;
-      if (std::holds_alternative<OtherFrame>(out.back().body)) ++counters_.unsupported;
-      head = scanned_;
-    } else {
-      // A false start gives up only its delimiter: the search resumes at the next byte, so a frame that begins
-      // inside the rejected bytes is still found.
-      ++counters_.resyncs;
-      if (step == Step::bad_checksum) ++counters_.crc_failures;
-      ++counters_.bytes_discarded;
-      ++head;
-    }
+void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Frame>& out) { scanner_.feed(chunk, out); }
+
+void Decoder::finish(std::vector<Frame>& out) { scanner_.finish(out); }
+
+// Reads the candidate's length, then its frame data and checksum. Every verdict depends only on bytes already
+// received, so the chunking of the stream cannot change it.
+inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /*at_end*/) {
+  std::size_t wire = 1;  // bytes of the candidate read so far, delimiter included
+  std::span<const std::uint8_t> body;
+  unescaped.clear();
+  if (const auto failed = read_body(c, 2, wire, body)) return {*failed};
+  const std::size_t length = std::size_t{body[0]} << 8 | body[1];
+  if (length == 0 || length > kMaxFrameData) return {Verdict::false_start};  // bad length
+  if (const auto failed = read_body(c, 2 + length + 1, wire, body)) return {*failed};
+  frame_data = body.subspan(2, length);
+  return {checksum(frame_data) == body.back() ? Verdict::frame : Verdict::bad_crc, wire};
+}
+
+// Makes `body` the first `want` bytes after the candidate's delimiter (length, frame data, checksum), unescaped in
+// mode 2, and `wire` the bytes they take on the wire with the delimiter; or says why not: need_more, or false_start
+// for a bad escape.
+std::optional<Verdict> Decoder::Framing::read_body(std::span<const std::uint8_t> c, std::size_t want, std::size_t& wire,
+                                                   std::span<const std::uint8_t>& body) {
+  if (mode == ApiMode::unescaped) {
+    if (c.size() < 1 + want) return Verdict::need_more;
+    wire = 1 + want;
+    body = c.subspan(1, want);
+    return std::nullopt;
   }
-  buf_.erase(buf_.begin(), buf_.begin() + static_cast<std::ptrdiff_t>(head));
-  if (in_frame_) scanned_ -= head;
-}
-
-void Decoder::finish() {
-  counters_.bytes_discarded += buf_.size();
-  buf_.clear();
-  in_frame_ = false;
-}
-
-// Advances the candidate at buf_[0] over the buffered wire bytes, unescaping them into body_.
-Decoder::Step Decoder::scan() {
-  while (scanned_ < buf_.size()) {
-    std::uint8_t byte = buf_[scanned_++];
-    if (mode_ == ApiMode::escaped) {
-      if (escape_pending_) {
-        escape_pending_ = false;
-        byte ^= kEscapeXor;
-        if (!is_reserved(byte)) return Step::bad_escape;
-      } else if (byte == kEscape) {
-        escape_pending_ = true;
-        continue;
-      } else if (is_reserved(byte)) {
-        // A raw 0x7E means this frame was cut short and a new one starts there; a mode-2 device never sends a raw
-        // XON/XOFF either.
-        return Step::bad_escape;
-      }
-    }
-    body_.push_back(byte);
-    if (expected_ == 0) {
-      if (body_.size() < 2) continue;
-      const std::size_t length = std::size_t{body_[0]} << 8 | body_[1];
-      if (length == 0 || length > kMaxFrameData) return Step::bad_length;
-      expected_ = 2 + length + 1;
-    } else if (body_.size() == expected_) {
-      return checksum(candidate_data()) == body_.back() ? Step::complete : Step::bad_checksum;
-    }
-    copy_plain_run();
+  while (unescaped.size() < want) {
+    // Runs of bytes that need no unescaping are copied whole.
+    const auto first = c.begin() + static_cast<std::ptrdiff_t>(wire);
+    const auto last = std::find_if(
+        first, first + static_cast<std::ptrdiff_t>(std::min(want - unescaped.size(), c.size() - wire)), is_reserved);
+    unescaped.insert(unescaped.end(), first, last);
+    wire += static_cast<std::size_t>(last - first);
+    if (unescaped.size() == want) break;
+    if (wire == c.size()) return Verdict::need_more;
+    // A raw 0x7E means this frame was cut short and a new one starts there; a mode-2 device never sends a raw
+    // XON/XOFF either; and an escape must stand for one of the four reserved bytes.
+    if (c[wire] != kEscape) return Verdict::false_start;
+    if (wire + 1 == c.size()) return Verdict::need_more;
+    const auto byte = static_cast<std::uint8_t>(c[wire + 1] ^ kEscapeXor);
+    if (!is_reserved(byte)) return Verdict::false_start;
+    unescaped.push_back(byte);
+    wire += 2;
   }
-  return Step::need_more;
+  body = unescaped;
+  return std::nullopt;
 }
 
-// Frame-data bytes that need no escape handling need no byte-at-a-time loop either: copies the buffered run of them,
-// stopping short of the checksum byte and, in mode 2, of the next reserved byte.
-void Decoder::copy_plain_run() {
-  const auto first = buf_.begin() + static_cast<std::ptrdiff_t>(scanned_);
-  auto last = first + static_cast<std::ptrdiff_t>(std::min(expected_ - body_.size() - 1, buf_.size() - scanned_));
-  if (mode_ == ApiMode::escaped) last = std::find_if(first, last, is_reserved);
-  body_.insert(body_.end(), first, last);
-  scanned_ += static_cast<std::size_t>(last - first);
+inline bool Decoder::Framing::take(std::span<const std::uint8_t> /*frame*/, std::vector<Frame>& out,
+                                   DecoderCounters& counters) {
+  const Frame& frame = out.emplace_back(parse_frame_data(frame_data));
+  if (std::holds_alternative<OtherFrame>(frame.body)) ++counters.unsupported;
+  return true;
 }
 
 void to_json(nlohmann::json& j, const Frame& f) {
   j = nlohmann::json{{"protocol", "xbee"}, {"frame_type", f.frame_type}};
   std::visit(Overloaded{[&](const RxPacket& rx) {
                           j["frame_type_name"] = "rx_packet";
-                          j["source64"] = hex_be(rx.source64, 8);
-                          j["source16"] = hex_be(rx.source16, 2);
+                          j["source64"] = hex(rx.source64, 8);
+                          j["source16"] = hex(rx.source16, 2);
                           j["options"] = rx.options;
                           j["payload"] = hex(rx.payload);
                         },
                         [&](const TxStatus& st) {
                           j["frame_type_name"] = "tx_status";
                           j["frame_id"] = st.frame_id;
-                          j["destination16"] = hex_be(st.destination16, 2);
+                          j["destination16"] = hex(st.destination16, 2);
                           j["retries"] = st.retries;
                           j["delivery_status"] = st.delivery_status;
                           j["discovery_status"] = st.discovery_status;
@@ -259,8 +215,8 @@ void to_json(nlohmann::json& j, const Frame& f) {
                         [&](const TxRequest& tx) {
                           j["frame_type_name"] = "tx_request";
                           j["frame_id"] = tx.frame_id;
-                          j["destination64"] = hex_be(tx.destination64, 8);
-                          j["destination16"] = hex_be(tx.destination16, 2);
+                          j["destination64"] = hex(tx.destination64, 8);
+                          j["destination16"] = hex(tx.destination16, 2);
                           j["radius"] = tx.radius;
                           j["options"] = tx.options;
                           j["payload"] = hex(tx.payload);

@@ -1,15 +1,17 @@
 #pragma once
 // Digi XBee API frames, in API mode 1 (unescaped) and API mode 2 (escaped); the layout, the resync rule and the
-// counters are described in docs/protocol-xbee.md. IMU frames riding inside RX packets are put back together by
-// protocol/xbee_imu_reassembler.hpp.
+// counters are described in docs/protocol.md, section "XBee API frames". IMU frames riding inside RX packets are put
+// back together by protocol/xbee_imu_reassembler.hpp.
 #include <cstddef>
 #include <cstdint>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <span>
 #include <variant>
 #include <vector>
 
 #include "protocol/decoder_counters.hpp"
+#include "protocol/stream_scanner.hpp"
 
 namespace imubridge::protocol::xbee {
 
@@ -72,32 +74,39 @@ std::uint8_t checksum(std::span<const std::uint8_t> frame_data) noexcept;
 // frame_type, or when the frame data would exceed kMaxFrameData (the decoder would reject it).
 void encode(const Frame& frame, ApiMode mode, std::vector<std::uint8_t>& out);
 
-// Streaming decoder: feed() any chunking of the byte stream and get the same frames and counters. Encoding is
-// canonical in both modes, so every emitted frame occupied exactly encode(frame, mode) on the wire.
+// Streaming decoder: feed() any chunking of the byte stream and get the same frames and counters. A candidate with a
+// bad length, escape or checksum is a false start and the search resumes at the byte after its delimiter, so a frame
+// that begins inside rejected bytes is still found (protocol/stream_scanner.hpp). Encoding is canonical in both
+// modes, so every emitted frame occupied exactly encode(frame, mode) on the wire.
 class Decoder {
  public:
-  explicit Decoder(ApiMode mode) : mode_(mode) {}
+  explicit Decoder(ApiMode mode) : scanner_(Framing{mode}) {}
 
   void feed(std::span<const std::uint8_t> chunk, std::vector<Frame>& out);
-  // End of stream: the bytes of an unfinished frame are counted as discarded, and the decoder starts afresh.
-  void finish();
-  const DecoderCounters& counters() const { return counters_; }
+  // End of stream: appends the frames still to be found in the buffered bytes, and counts the rest as discarded.
+  void finish(std::vector<Frame>& out);
+  const DecoderCounters& counters() const { return scanner_.counters(); }
 
  private:
-  enum class Step { need_more, complete, bad_length, bad_escape, bad_checksum };
-  Step scan();
-  void copy_plain_run();
-  // The complete candidate's frame data: body_ without the length bytes and the checksum.
-  std::span<const std::uint8_t> candidate_data() const { return std::span(body_).subspan(2, expected_ - 3); }
+  // What is particular to XBee API frames; the rest of decoding is StreamScanner's.
+  struct Framing {
+    using Finder = StartFinder<kStartDelimiter>;
+    // The longest candidate: kMaxFrameData bytes of frame data with every byte after the delimiter escaped.
+    static constexpr std::size_t kMaxCandidate = 1 + 2 * (2 + kMaxFrameData + 1);
 
-  ApiMode mode_;
-  DecoderCounters counters_;
-  std::vector<std::uint8_t> buf_;  // wire bytes not yet resolved; buf_[0] is a candidate's delimiter if in_frame_
-  bool in_frame_ = false;
-  std::size_t scanned_ = 0;         // index in buf_ of the candidate's next wire byte
-  bool escape_pending_ = false;     // the previous wire byte was the escape 0x7D
-  std::size_t expected_ = 0;        // unescaped bytes after the delimiter the candidate needs (0: length unknown)
-  std::vector<std::uint8_t> body_;  // the candidate's unescaped bytes after the delimiter: length, data, checksum
+    explicit Framing(ApiMode m) : mode(m) {}
+
+    Judgement judge(std::span<const std::uint8_t> candidate, bool at_end);
+    bool take(std::span<const std::uint8_t> frame, std::vector<Frame>& out, DecoderCounters& counters);
+    std::optional<Verdict> read_body(std::span<const std::uint8_t> candidate, std::size_t want, std::size_t& wire,
+                                     std::span<const std::uint8_t>& body);
+
+    ApiMode mode;
+    std::vector<std::uint8_t> unescaped;       // mode 2: the judged candidate after its delimiter, unescaped
+    std::span<const std::uint8_t> frame_data;  // of the frame judge() last found valid
+  };
+
+  StreamScanner<Framing> scanner_;
 };
 
 // {"protocol":"xbee","frame_type":144,"frame_type_name":"rx_packet","source64":"0013A20040A1B2C3","source16":"FFFE",

@@ -23,13 +23,17 @@ class XbeeImuReassembler {
 
   // Appends the IMU frames this packet completes, in the order they were sent.
   void on_rx(const xbee::RxPacket& rx, std::vector<SourcedFrame>& out);
-  // End of stream for every source: their unfinished frames are counted as discarded.
-  void finish();
+  // End of stream for every source: appends the frames each source's decoder still finds in its buffered bytes (in
+  // order of source address), and counts the rest as discarded.
+  void finish(std::vector<SourcedFrame>& out);
   // Summed over sources; bytes_in counts RF payload bytes.
   DecoderCounters counters() const;
   const std::map<std::uint64_t, imu::Decoder>& sources() const { return sources_; }
 
  private:
+  // Moves the frames a source's decoder left in decoded_ to `out`, tagged with the source.
+  void emit(std::uint64_t source64, std::vector<SourcedFrame>& out);
+
   std::map<std::uint64_t, imu::Decoder> sources_;
   std::vector<imu::Frame> decoded_;  // scratch, kept to reuse its allocation
 };

@@ -10,11 +10,16 @@
 #include <vector>
 
 #include "protocol/crc.hpp"
+#include "tests/decoder_harness.hpp"
 
 namespace imubridge::protocol::imu {
+void PrintTo(const Frame& f, std::ostream* os) { *os << nlohmann::json(f).dump(); }
+
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
+using harness::append;
+using harness::crc_bit_serial;
 
 // The IMU sample frame of docs/protocol.md, written byte by byte from the layout table.
 const Bytes kDocVector = {
@@ -31,16 +36,6 @@ const Bytes kDocVector = {
     0x39, 0xB8,                                      // CRC 0xB839
 };
 
-// CRC-16/MCRF4XX bit by bit, straight from its definition: an implementation independent of protocol/crc.cpp.
-std::uint16_t crc_bit_serial(std::span<const std::uint8_t> data) {
-  std::uint16_t crc = 0xFFFF;
-  for (std::uint8_t byte : data) {
-    crc ^= byte;
-    for (int bit = 0; bit < 8; ++bit) crc = (crc & 1) ? (crc >> 1) ^ 0x8408 : crc >> 1;
-  }
-  return crc;
-}
-
 Frame imu_sample(std::uint16_t seq) {
   const auto s = static_cast<std::int16_t>(seq);
   return {seq, seq, 1'000'000u + 10'000u * seq, ImuRaw{{2048, 2050, 1527}, {-3, 4, s}, {210, -95, -480}, -16000}};
@@ -55,8 +50,6 @@ Bytes encoded(const Frame& frame) {
   encode(frame, out);
   return out;
 }
-
-void append(Bytes& stream, const Bytes& bytes) { stream.insert(stream.end(), bytes.begin(), bytes.end()); }
 
 // A well-formed frame of a type this decoder does not know.
 Bytes unknown_type_frame(std::uint16_t seq) {
@@ -74,22 +67,11 @@ bool sync_bytes_only_in_front(const Bytes& frame) {
   return std::none_of(frame.begin() + 2, frame.end(), [](std::uint8_t b) { return b == kSync0 || b == kSync1; });
 }
 
-struct Decoded {
-  std::vector<Frame> frames;
-  DecoderCounters counters;
-};
+using Decoded = harness::Decoded<Decoder>;
 
 // Feeds `stream` in pieces of `chunk` bytes (0: all at once), then finishes.
 Decoded decode(std::span<const std::uint8_t> stream, std::size_t chunk = 0) {
-  Decoder decoder;
-  Decoded d;
-  if (chunk == 0) chunk = std::max<std::size_t>(stream.size(), 1);
-  for (std::size_t at = 0; at < stream.size(); at += chunk) {
-    decoder.feed(stream.subspan(at, std::min(chunk, stream.size() - at)), d.frames);
-  }
-  decoder.finish();
-  d.counters = decoder.counters();
-  return d;
+  return harness::decode_chunked(Decoder{}, stream, chunk);
 }
 
 std::uint64_t bytes_in_frames(const std::vector<Frame>& frames) {
@@ -174,18 +156,10 @@ Bytes troubled_stream() {
 TEST(ImuFrameDecoder, SameFramesAndCountersAtEverySplitPoint) {
   const Bytes stream = troubled_stream();
   const Decoded whole = decode(stream);
-  ASSERT_EQ(whole.frames.size(), 11u);  // seq 1, 3..11, 13: the stream exercises what it claims to
-  ASSERT_EQ(whole.counters.resyncs, 4u);
+  ASSERT_EQ(whole.frames.size(), 11u);    // seq 1, 3..11, 13: the stream exercises what it claims to
+  ASSERT_EQ(whole.counters.resyncs, 5u);  // the last of them: the frame cut off by the end of the stream
 
-  for (std::size_t split = 0; split <= stream.size(); ++split) {
-    Decoder decoder;
-    std::vector<Frame> frames;
-    decoder.feed(std::span(stream).first(split), frames);
-    decoder.feed(std::span(stream).subspan(split), frames);
-    decoder.finish();
-    ASSERT_EQ(frames, whole.frames) << "split at " << split;
-    ASSERT_EQ(decoder.counters(), whole.counters) << "split at " << split;
-  }
+  EXPECT_EQ(harness::first_split_that_differs(Decoder{}, stream, whole), std::nullopt);
 }
 
 TEST(ImuFrameDecoder, SameFramesAndCountersForAnyChunkSize) {
@@ -295,18 +269,38 @@ TEST(ImuFrameDecoder, UnsupportedTypeIsCountedAndSkippedWhole) {
 
 TEST(ImuFrameDecoder, SequenceWrapsAndGaps) {
   Bytes stream;
-  for (std::uint16_t seq : {65534, 65535, 0, 1, 5, 5}) append(stream, encoded(imu_sample(seq)));
+  for (std::uint16_t seq : {65534, 65535, 0, 1, 5}) append(stream, encoded(imu_sample(seq)));
   const Decoded d = decode(stream);
   std::vector<std::uint64_t> sequences;
   for (const Frame& f : d.frames) sequences.push_back(f.sequence);
-  // The first frame starts the count at its own number; a repeated number reads as a full wrap.
-  EXPECT_EQ(sequences, (std::vector<std::uint64_t>{65534, 65535, 65536, 65537, 65541, 65541 + 65536}));
-  EXPECT_EQ(d.counters.sequence_gaps, 2u);
-  EXPECT_EQ(d.counters.frames_lost, 3u + 65535u);
+  // The first frame starts the count at its own number.
+  EXPECT_EQ(sequences, (std::vector<std::uint64_t>{65534, 65535, 65536, 65537, 65541}));
+  EXPECT_EQ(d.counters.sequence_gaps, 1u);
+  EXPECT_EQ(d.counters.frames_lost, 3u);
+}
+
+TEST(ImuFrameDecoder, RepeatedSequenceNumberIsADuplicateNotALoss) {
+  // A radio that retransmits delivers the same frame twice; a repeated number is dropped whatever the frame holds.
+  const Bytes first = encoded(imu_sample(7)), next = encoded(velocity_estimate(8));
+  Frame changed = velocity_estimate(8);
+  std::get<VelocityEstimate>(changed.payload).vx = 99;
+  Bytes stream;
+  for (const Bytes& f : {first, first, first, next, encoded(changed)}) append(stream, f);
+  append(stream, encoded(imu_sample(10)));
+
+  const Decoded d = decode(stream);
+  EXPECT_EQ(d.frames, (std::vector<Frame>{imu_sample(7), velocity_estimate(8), imu_sample(10)}));
+  EXPECT_EQ(d.counters, (DecoderCounters{.bytes_in = stream.size(),
+                                         .frames_out = 3,
+                                         .bytes_discarded = 2 * first.size() + next.size(),
+                                         .sequence_gaps = 1,  // 8 -> 10: the repeats do not hide it
+                                         .frames_lost = 1,
+                                         .duplicates = 3}));
 }
 
 TEST(ImuFrameDecoder, FinishDiscardsTheTruncatedTail) {
   const Bytes next = encoded(imu_sample(1));
+  ASSERT_TRUE(sync_bytes_only_in_front(next));
   for (std::size_t tail : {std::size_t{1}, std::size_t{30}}) {  // a lone sync byte; a frame cut short
     Bytes stream = encoded(imu_sample(0));
     stream.insert(stream.end(), next.begin(), next.begin() + static_cast<std::ptrdiff_t>(tail));
@@ -317,12 +311,36 @@ TEST(ImuFrameDecoder, FinishDiscardsTheTruncatedTail) {
     EXPECT_EQ(frames, std::vector<Frame>{imu_sample(0)});
     EXPECT_EQ(decoder.counters().bytes_discarded, 0u);  // the tail may still become a frame
 
-    decoder.finish();
+    decoder.finish(frames);
+    EXPECT_EQ(frames, std::vector<Frame>{imu_sample(0)});
     EXPECT_EQ(decoder.counters().bytes_discarded, tail);
+    EXPECT_EQ(decoder.counters().resyncs, 1u);  // a candidate cut off by the end is a false start
     EXPECT_EQ(decoder.counters().bytes_in, bytes_in_frames(frames) + decoder.counters().bytes_discarded);
-    decoder.finish();
+    decoder.finish(frames);
     EXPECT_EQ(decoder.counters().bytes_discarded, tail) << "a second finish() must not count the tail again";
   }
+}
+
+TEST(ImuFrameDecoder, FinishFindsFramesInsideACutOffFalseStart) {
+  // Near the end of the stream, a corrupted header claims a 255-byte payload of an unknown type: more bytes than
+  // remain, so only the end of the stream refutes it, and the two frames inside it come out of finish().
+  const Bytes false_start = {kSync0, kSync1, kVersion, 0x7F, 0xFF};
+  Bytes stream = encoded(imu_sample(0));
+  append(stream, false_start);
+  append(stream, encoded(imu_sample(1)));
+  append(stream, encoded(velocity_estimate(2)));
+
+  Decoder decoder;
+  std::vector<Frame> frames;
+  decoder.feed(stream, frames);
+  EXPECT_EQ(frames, std::vector<Frame>{imu_sample(0)});
+  decoder.finish(frames);
+  const Decoded whole{frames, decoder.counters()};
+  EXPECT_EQ(whole.frames, (std::vector<Frame>{imu_sample(0), imu_sample(1), velocity_estimate(2)}));
+  EXPECT_EQ(whole.counters,
+            (DecoderCounters{
+                .bytes_in = stream.size(), .frames_out = 3, .resyncs = 1, .bytes_discarded = false_start.size()}));
+  EXPECT_EQ(harness::first_split_that_differs(Decoder{}, stream, whole), std::nullopt);
 }
 
 TEST(ImuFrameDecoder, AccountingIdentityOnTroubledStream) {

@@ -10,16 +10,19 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <tuple>
 #include <vector>
 
 #include "protocol/crc.hpp"
+#include "tests/decoder_harness.hpp"
 
 namespace imubridge::protocol::mavlink {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-void append(Bytes& stream, const Bytes& bytes) { stream.insert(stream.end(), bytes.begin(), bytes.end()); }
+using harness::append;
+using harness::crc_bit_serial;
 
 Bytes bytes_of(const Message& m) {
   Bytes out;
@@ -29,22 +32,11 @@ Bytes bytes_of(const Message& m) {
 
 Bytes bytes_of(const Decoded& message, const FrameOptions& options) { return bytes_of(make_message(message, options)); }
 
-struct Decoding {
-  std::vector<Message> messages;
-  DecoderCounters counters;
-};
+using Decoding = harness::Decoded<Decoder>;
 
 // Feeds `stream` in pieces of `chunk` bytes (0: all at once), then finishes.
 Decoding decode_stream(std::span<const std::uint8_t> stream, std::size_t chunk = 0) {
-  Decoder decoder;
-  Decoding r;
-  if (chunk == 0) chunk = std::max<std::size_t>(stream.size(), 1);
-  for (std::size_t at = 0; at < stream.size(); at += chunk) {
-    decoder.feed(stream.subspan(at, std::min(chunk, stream.size() - at)), r.messages);
-  }
-  decoder.finish(r.messages);
-  r.counters = decoder.counters();
-  return r;
+  return harness::decode_chunked(Decoder{}, stream, chunk);
 }
 
 std::uint64_t frame_bytes(const std::vector<Message>& messages) {
@@ -217,16 +209,6 @@ nlohmann::json read_field(const WireField& f, const std::uint8_t* p) {
   return bits;  // the unsigned types
 }
 
-// CRC-16/MCRF4XX bit by bit, straight from its definition: apart from protocol/crc.cpp and its tables.
-std::uint16_t crc_bit_serial(std::span<const std::uint8_t> data) {
-  std::uint16_t crc = 0xFFFF;
-  for (std::uint8_t byte : data) {
-    crc ^= byte;
-    for (int bit = 0; bit < 8; ++bit) crc = (crc & 1) ? (crc >> 1) ^ 0x8408 : crc >> 1;
-  }
-  return crc;
-}
-
 TEST(MavlinkCrc, PublishedCheckValue) {
   const std::string_view text = "123456789";
   const std::span<const std::uint8_t> check(reinterpret_cast<const std::uint8_t*>(text.data()), text.size());
@@ -281,7 +263,7 @@ TEST(MavlinkDefinitions, WireLayoutMatchesTheDefinitions) {
 
 // ---- Framing ----
 
-// The example of docs/protocol-mavlink.md: SCALED_IMU in MAVLink 2, written byte by byte from the layout.
+// The example of docs/protocol.md, section "MAVLink": SCALED_IMU in MAVLink 2, written byte by byte from the layout.
 const Bytes kDocExample = {
     0xFD,                                // STX: MAVLink 2
     0x18, 0x00, 0x00,                    // len 24, incompat flags, compat flags
@@ -303,8 +285,8 @@ TEST(MavlinkFrame, DocumentedExample) {
 
   EXPECT_EQ(bytes_of(kDocScaledImu, {.seq = 7}), kDocExample);
   const Decoding r = decode_stream(kDocExample);
-  ASSERT_EQ(r.messages.size(), 1u);
-  const Message& m = r.messages[0];
+  ASSERT_EQ(r.frames.size(), 1u);
+  const Message& m = r.frames[0];
   EXPECT_EQ(m.version, 2);
   EXPECT_EQ(m.seq, 7);
   EXPECT_EQ(m.sysid, 1);
@@ -412,8 +394,8 @@ TEST(MavlinkFrame, RoundTripsEveryMessageInEveryFraming) {
     EXPECT_EQ(bytes.size(), header + c.len + 2 + (c.options.sign ? 13 : 0));
 
     const Decoding r = decode_stream(bytes);
-    ASSERT_EQ(r.messages.size(), 1u);
-    const Message& m = r.messages[0];
+    ASSERT_EQ(r.frames.size(), 1u);
+    const Message& m = r.frames[0];
     EXPECT_EQ(m, make_message(c.sent, options));
     EXPECT_EQ(m.version, c.options.version);
     EXPECT_EQ(m.len, c.len);
@@ -432,9 +414,9 @@ TEST(MavlinkFrame, SignatureIsSkippedWhateverItHolds) {
   Bytes stream = signed_frame;
   append(stream, bytes_of(kScaled, {.seq = 1}));
   const Decoding r = decode_stream(stream);
-  ASSERT_EQ(r.messages.size(), 2u);
-  EXPECT_TRUE(r.messages[0].signed_);
-  EXPECT_EQ(decode(r.messages[1]), Decoded{kScaled});
+  ASSERT_EQ(r.frames.size(), 2u);
+  EXPECT_TRUE(r.frames[0].signed_);
+  EXPECT_EQ(decode(r.frames[1]), Decoded{kScaled});
   EXPECT_EQ(r.counters.resyncs, 0u);
   EXPECT_EQ(r.counters.bytes_discarded, 0u);
 }
@@ -482,18 +464,10 @@ Bytes troubled_stream() {
 TEST(MavlinkDecoder, SameMessagesAndCountersAtEverySplitPoint) {
   const Bytes stream = troubled_stream();
   const Decoding whole = decode_stream(stream);
-  ASSERT_EQ(whole.messages.size(), 11u);  // seq 0, 2..9, 11, 12
-  EXPECT_EQ(whole.counters.bytes_in, whole.counters.bytes_discarded + frame_bytes(whole.messages));
+  ASSERT_EQ(whole.frames.size(), 11u);  // seq 0, 2..9, 11, 12
+  EXPECT_EQ(whole.counters.bytes_in, whole.counters.bytes_discarded + frame_bytes(whole.frames));
 
-  for (std::size_t split = 0; split <= stream.size(); ++split) {
-    Decoder decoder;
-    std::vector<Message> messages;
-    decoder.feed(std::span(stream).first(split), messages);
-    decoder.feed(std::span(stream).subspan(split), messages);
-    decoder.finish(messages);
-    ASSERT_EQ(messages, whole.messages) << "split at " << split;
-    ASSERT_EQ(decoder.counters(), whole.counters) << "split at " << split;
-  }
+  EXPECT_EQ(harness::first_split_that_differs(Decoder{}, stream, whole), std::nullopt);
 }
 
 TEST(MavlinkDecoder, SameMessagesAndCountersForAnyChunkSize) {
@@ -502,7 +476,7 @@ TEST(MavlinkDecoder, SameMessagesAndCountersForAnyChunkSize) {
   const Decoding whole = decode_stream(stream);
   for (std::size_t chunk : {1u, 2u, 3u, 35u, 36u, 37u, 280u, 281u, 282u, 4096u}) {
     const Decoding r = decode_stream(stream, chunk);
-    EXPECT_EQ(r.messages, whole.messages) << "chunk " << chunk;
+    EXPECT_EQ(r.frames, whole.frames) << "chunk " << chunk;
     EXPECT_EQ(r.counters, whole.counters) << "chunk " << chunk;
   }
 }
@@ -527,10 +501,10 @@ TEST(MavlinkDecoder, GarbageTruncationAndBitFlipsCountedExactly) {
   stream.push_back(0x77);  // trailing noise
 
   const Decoding r = decode_stream(stream);
-  ASSERT_EQ(r.messages.size(), 3u);
-  EXPECT_EQ(r.messages[0], make_message(kHighres, {.seq = 0}));
-  EXPECT_EQ(r.messages[1], make_message(kAttitude, {.version = 1, .seq = 2}));
-  EXPECT_EQ(r.messages[2], make_message(kScaled, {.seq = 4}));
+  ASSERT_EQ(r.frames.size(), 3u);
+  EXPECT_EQ(r.frames[0], make_message(kHighres, {.seq = 0}));
+  EXPECT_EQ(r.frames[1], make_message(kAttitude, {.version = 1, .seq = 2}));
+  EXPECT_EQ(r.frames[2], make_message(kScaled, {.seq = 4}));
 
   DecoderCounters expected;
   expected.bytes_in = stream.size();
@@ -554,9 +528,9 @@ TEST(MavlinkDecoder, FindsFrameStartingInsideRejectedCandidate) {
   append(stream, next);
 
   const Decoding r = decode_stream(stream);
-  ASSERT_EQ(r.messages.size(), 2u);
-  EXPECT_EQ(decode(r.messages[0]), Decoded{kHighres});
-  EXPECT_EQ(decode(r.messages[1]), Decoded{kAttitude});
+  ASSERT_EQ(r.frames.size(), 2u);
+  EXPECT_EQ(decode(r.frames[0]), Decoded{kHighres});
+  EXPECT_EQ(decode(r.frames[1]), Decoded{kAttitude});
   EXPECT_EQ(r.counters.crc_failures, 1u);
   EXPECT_EQ(r.counters.resyncs, 1u);
   EXPECT_EQ(r.counters.bytes_discarded, false_start.size());
@@ -577,15 +551,15 @@ TEST(MavlinkDecoder, UnknownIdsAreCountedAndTrustedOnlyBeforeAnotherFrame) {
   append(stream, unknown_frame);  // ends the stream: accepted at finish()
 
   const Decoding r = decode_stream(stream);
-  ASSERT_EQ(r.messages.size(), 3u);
-  EXPECT_EQ(r.messages[0], unknown);
-  EXPECT_EQ(r.messages[1].msgid, 0u);
-  EXPECT_EQ(r.messages[2], unknown);
+  ASSERT_EQ(r.frames.size(), 3u);
+  EXPECT_EQ(r.frames[0], unknown);
+  EXPECT_EQ(r.frames[1].msgid, 0u);
+  EXPECT_EQ(r.frames[2], unknown);
   EXPECT_EQ(r.counters.unsupported, 3u);
   EXPECT_EQ(r.counters.resyncs, 2u);
   EXPECT_EQ(r.counters.crc_failures, 1u);
   EXPECT_EQ(r.counters.bytes_discarded, unknown_frame.size() + 1 + bad_heartbeat.size());
-  EXPECT_EQ(nlohmann::json(r.messages[0])["payload"], "090807");
+  EXPECT_EQ(nlohmann::json(r.frames[0])["payload"], "090807");
 
   // Until the byte after it arrives (or the stream ends), an unknown-id frame is undecided.
   Decoder decoder;
@@ -596,22 +570,69 @@ TEST(MavlinkDecoder, UnknownIdsAreCountedAndTrustedOnlyBeforeAnotherFrame) {
   EXPECT_EQ(out.size(), 1u);
 }
 
+struct Sent {
+  std::uint8_t sysid, compid, seq;
+};
+
+Bytes attitude_frames(const std::vector<Sent>& sent) {
+  Bytes stream;
+  for (const Sent& s : sent) append(stream, bytes_of(kAttitude, {.seq = s.seq, .sysid = s.sysid, .compid = s.compid}));
+  return stream;
+}
+
 TEST(MavlinkDecoder, SequenceGapsPerSenderWithWrap) {
-  struct Sent {
-    std::uint8_t sysid, compid, seq;
-  };
   const std::vector<Sent> sent = {
       {1, 1, 254},  {1, 200, 10}, {1, 1, 255}, {2, 1, 250}, {1, 1, 0},  // 255 -> 0 wraps without a gap
       {1, 200, 12},                                                     // one frame lost
       {1, 1, 1},    {2, 1, 3},                                          // 250 -> 3 across the wrap: 8 lost
-      {1, 1, 1},                                                        // a repeat reads as 255 lost
   };
-  Bytes stream;
-  for (const Sent& s : sent) append(stream, bytes_of(kAttitude, {.seq = s.seq, .sysid = s.sysid, .compid = s.compid}));
+  const Decoding r = decode_stream(attitude_frames(sent));
+  EXPECT_EQ(r.frames.size(), sent.size());
+  EXPECT_EQ(r.counters.sequence_gaps, 2u);
+  EXPECT_EQ(r.counters.frames_lost, 1u + 8u);
+  EXPECT_EQ(r.counters.duplicates, 0u);
+}
+
+TEST(MavlinkDecoder, RepeatedSequenceNumberFromAComponentIsADuplicate) {
+  // A telemetry radio that retransmits delivers a frame twice. Another component may use the same number meanwhile.
+  const std::vector<Sent> sent = {
+      {1, 1, 5},   {1, 1, 5},  // a repeat
+      {1, 200, 5},             // the same number from another component: its own first frame
+      {1, 1, 5},               // still (1, 1)'s previous number: a repeat
+      {1, 200, 6}, {1, 1, 6},  // both next in line
+  };
+  const Bytes stream = attitude_frames(sent);
   const Decoding r = decode_stream(stream);
-  EXPECT_EQ(r.messages.size(), sent.size());
-  EXPECT_EQ(r.counters.sequence_gaps, 3u);
-  EXPECT_EQ(r.counters.frames_lost, 1u + 8u + 255u);
+  std::vector<std::tuple<int, int, int>> received;
+  for (const Message& m : r.frames) received.emplace_back(m.sysid, m.compid, m.seq);
+  EXPECT_EQ(received, (std::vector<std::tuple<int, int, int>>{{1, 1, 5}, {1, 200, 5}, {1, 200, 6}, {1, 1, 6}}));
+  EXPECT_EQ(r.counters, (DecoderCounters{.bytes_in = stream.size(),
+                                         .frames_out = 4,
+                                         .bytes_discarded = 2 * stream.size() / sent.size(),
+                                         .duplicates = 2}));
+}
+
+TEST(MavlinkDecoder, FinishFindsAFrameInsideACutOffFalseStart) {
+  // Near the end of the stream a noise STX starts a header whose length claims more bytes than remain: only the end
+  // of the stream refutes it, and the frame inside it comes out of finish().
+  const Bytes first = bytes_of(kHighres, {.seq = 0}), hidden = bytes_of(kAttitude, {.seq = 1});
+  const Bytes false_start = {kStxV1, 200, 9, 1, 1, Attitude::kId};
+  Bytes stream = first;
+  append(stream, false_start);
+  append(stream, hidden);
+  ASSERT_TRUE(stx_only_in_front(hidden));
+
+  Decoder decoder;
+  std::vector<Message> messages;
+  decoder.feed(stream, messages);
+  EXPECT_EQ(messages, std::vector{make_message(kHighres, {.seq = 0})});
+  decoder.finish(messages);
+  const Decoding whole{messages, decoder.counters()};
+  EXPECT_EQ(whole.frames, (std::vector{make_message(kHighres, {.seq = 0}), make_message(kAttitude, {.seq = 1})}));
+  EXPECT_EQ(whole.counters,
+            (DecoderCounters{
+                .bytes_in = stream.size(), .frames_out = 2, .resyncs = 1, .bytes_discarded = false_start.size()}));
+  EXPECT_EQ(harness::first_split_that_differs(Decoder{}, stream, whole), std::nullopt);
 }
 
 TEST(MavlinkDecoder, EveryByteIsInAFrameOrDiscarded) {
@@ -621,8 +642,8 @@ TEST(MavlinkDecoder, EveryByteIsInAFrameOrDiscarded) {
   for (std::size_t chunk : {0u, 1u, 7u, 100u}) {
     const Decoding r = decode_stream(stream, chunk);
     EXPECT_EQ(r.counters.bytes_in, stream.size());
-    EXPECT_EQ(r.counters.frames_out, r.messages.size());
-    EXPECT_EQ(r.counters.bytes_in, frame_bytes(r.messages) + r.counters.bytes_discarded) << "chunk " << chunk;
+    EXPECT_EQ(r.counters.frames_out, r.frames.size());
+    EXPECT_EQ(r.counters.bytes_in, frame_bytes(r.frames) + r.counters.bytes_discarded) << "chunk " << chunk;
   }
 }
 
@@ -716,7 +737,7 @@ TEST(MavlinkSample, RawImuGoesThroughTheCalibration) {
 TEST(MavlinkSample, OtherMessagesAreNotSamples) {
   Calibration c;
   EXPECT_EQ(to_sample(make_message(kAttitude, {}), &c), std::nullopt);
-  EXPECT_EQ(to_sample(decode_stream(heartbeat(0)).messages.at(0), &c), std::nullopt);
+  EXPECT_EQ(to_sample(decode_stream(heartbeat(0)).frames.at(0), &c), std::nullopt);
 }
 
 }  // namespace

@@ -9,10 +9,11 @@
 #include <span>
 #include <vector>
 
+#include "tests/decoder_harness.hpp"
+
 namespace imubridge::protocol {
 
 // Readable failure messages for the EXPECT_EQs below.
-void PrintTo(const DecoderCounters& c, std::ostream* os) { *os << nlohmann::json(c).dump(); }
 namespace imu {
 void PrintTo(const Frame& f, std::ostream* os) { *os << nlohmann::json(f).dump(); }
 }  // namespace imu
@@ -66,7 +67,7 @@ TEST(XbeeImuReassembler, FramesSplitAcrossPackets) {
   std::vector<XbeeImuReassembler::SourcedFrame> out;
   // Cuts fall inside headers, payloads and CRCs; one packet carries a single byte.
   for (const auto& rx : packets(kVehicleA, stream, {1, 10, 36, 2, 50, 86})) reassembler.on_rx(rx, out);
-  reassembler.finish();
+  reassembler.finish(out);
   EXPECT_EQ(frames_from(kVehicleA, out), frames);
   EXPECT_EQ(out.size(), frames.size());
   EXPECT_EQ(reassembler.counters(), (DecoderCounters{.bytes_in = stream.size(), .frames_out = 5}));
@@ -130,7 +131,7 @@ TEST(XbeeImuReassembler, LostPacketHurtsOnlyItsOwnVehicle) {
     if (i < rx_a.size()) reassembler.on_rx(rx_a[i], out);
     reassembler.on_rx(rx_b[i], out);
   }
-  reassembler.finish();
+  reassembler.finish(out);
 
   EXPECT_EQ(frames_from(kVehicleA, out), (std::vector{frames_a[0], frames_a[3], frames_a[4]}));
   EXPECT_EQ(frames_from(kVehicleB, out), frames_b);
@@ -152,11 +153,48 @@ TEST(XbeeImuReassembler, FinishCountsUnfinishedFramesAndSumsSources) {
   std::vector<XbeeImuReassembler::SourcedFrame> out;
   reassembler.on_rx({kVehicleA, 0xFFFE, 0x01, one_and_a_half}, out);
   reassembler.on_rx({kVehicleB, 0xFFFE, 0x01, stream}, out);
-  reassembler.finish();
+  reassembler.finish(out);
   EXPECT_EQ(out.size(), 3u);
+  // A's half frame is cut off by the end of the stream: a false start.
   EXPECT_EQ(
       reassembler.counters(),
-      (DecoderCounters{.bytes_in = one_and_a_half.size() + stream.size(), .frames_out = 3, .bytes_discarded = 18}));
+      (DecoderCounters{
+          .bytes_in = one_and_a_half.size() + stream.size(), .frames_out = 3, .resyncs = 1, .bytes_discarded = 18}));
+}
+
+TEST(XbeeImuReassembler, FinishEmitsWhatEachSourceStillFinds) {
+  // Vehicle A's last packet starts with a corrupted IMU header claiming a 255-byte payload, over a real frame: only the
+  // end of the stream refutes the claim, so that frame comes out of finish(), tagged with A.
+  const auto frames = imu_frames(2, 100);
+  Bytes last_packet = {imu::kSync0, imu::kSync1, imu::kVersion, 0x7F, 0xFF};
+  imu::encode(frames[1], last_packet);
+
+  XbeeImuReassembler reassembler;
+  std::vector<XbeeImuReassembler::SourcedFrame> out;
+  reassembler.on_rx({kVehicleB, 0xFFFE, 0x01, imu_stream({frames[0]})}, out);
+  reassembler.on_rx({kVehicleA, 0xFFFE, 0x01, last_packet}, out);
+  EXPECT_EQ(out, (std::vector<XbeeImuReassembler::SourcedFrame>{{kVehicleB, frames[0]}}));
+  reassembler.finish(out);
+  EXPECT_EQ(out, (std::vector<XbeeImuReassembler::SourcedFrame>{{kVehicleB, frames[0]}, {kVehicleA, frames[1]}}));
+  EXPECT_EQ(reassembler.sources().at(kVehicleA).counters(),
+            (DecoderCounters{.bytes_in = last_packet.size(), .frames_out = 1, .resyncs = 1, .bytes_discarded = 5}));
+}
+
+TEST(XbeeImuReassembler, RetransmittedPacketIsCountedAsDuplicates) {
+  // The sending radio did not get its acknowledgement and sent packet 1 again; the receiver got both copies.
+  const auto frames = imu_frames(3, 100);
+  const auto rxs = packets(kVehicleA, imu_stream(frames), {imu::encoded_size(frames[0])});
+  ASSERT_EQ(rxs.size(), 3u);
+
+  XbeeImuReassembler reassembler;
+  std::vector<XbeeImuReassembler::SourcedFrame> out;
+  for (const xbee::RxPacket& rx : {rxs[0], rxs[1], rxs[1], rxs[2]}) reassembler.on_rx(rx, out);
+  reassembler.finish(out);
+  EXPECT_EQ(frames_from(kVehicleA, out), frames);
+  const std::size_t frame_size = imu::encoded_size(frames[0]);
+  EXPECT_EQ(
+      reassembler.counters(),
+      (DecoderCounters{.bytes_in = 4 * frame_size, .frames_out = 3, .bytes_discarded = frame_size, .duplicates = 1}));
 }
 
 }  // namespace
