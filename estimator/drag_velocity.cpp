@@ -1,5 +1,7 @@
 #include "estimator/drag_velocity.hpp"
 
+#include <limits>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -16,12 +18,10 @@ constexpr double kMinGammaZ = 0.1;
 
 const FullModelParams& checked(const FullModelParams& p) {
   if (auto error = validate(p)) throw std::invalid_argument("DragVelocityEstimator: " + *error);
-  for (int axis = 0; axis < 2; ++axis) {
-    if (!(p.drag_linear[axis] + p.drag_quadratic[axis] > 0.0))
-      throw std::invalid_argument("DragVelocityEstimator: no drag identified on a horizontal axis");
-  }
   return p;
 }
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 void check(const DragVelocityConfig& c) {
   const bool positive = c.max_gap > 0.0 && c.accel_noise > 0.0 && c.accel_process_noise > 0.0 && c.gyro_noise > 0.0 &&
@@ -94,17 +94,21 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   out.f = f_cm.head<2>();
   const double f_var = config_.accel_noise * config_.accel_noise;
   for (int axis = 0; axis < 2; ++axis) {
+    out.f_var[axis] = f_var;
+    if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
+      out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
+      continue;
+    }
     const double k = params_.drag_linear[axis];
     const double mu = params_.drag_quadratic[axis];
     const double v_raw = invert_drag(k, mu, out.f[axis]);
     const double slope = drag_slope(k, mu, v_raw);
-    out.f_var[axis] = f_var;
     out.v_raw[axis] = v_raw;
     out.v_raw_var[axis] = f_var / (slope * slope);
     fuse_velocity(axis, v_raw);
+    out.v[axis] = x_[axis];
+    out.v_var[axis] = p_(axis, axis);
   }
-  out.v = x_.head<2>();
-  out.v_var = p_.diagonal().head<2>();
   out.gyro_bias = x_.tail<2>();
   ++counters_.estimates_out;
   return out;

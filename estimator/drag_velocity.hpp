@@ -52,7 +52,8 @@ struct DragVelocityCounters {
 
 class DragVelocityEstimator {
  public:
-  // Throws std::invalid_argument for invalid params, an axis without drag (nothing to invert) or a bad config.
+  // Throws std::invalid_argument for invalid params or a bad config. An axis without drag (k = mu = 0, as before
+  // identification) has nothing to invert: its force is still compensated, its velocity reads NaN.
   DragVelocityEstimator(const FullModelParams& params, const DragVelocityConfig& config);
 
   // O(1) work and no allocation. Returns the estimate for the sample delay_samples() back once the differentiator
@@ -61,6 +62,7 @@ class DragVelocityEstimator {
 
   const DragVelocityCounters& counters() const { return counters_; }
   int delay_samples() const { return differentiator_.delay_samples(); }
+  bool has_drag(int axis) const { return params_.drag_linear[axis] + params_.drag_quadratic[axis] > 0.0; }
 
  private:
   using Vector6d = Eigen::Matrix<double, 6, 1>;

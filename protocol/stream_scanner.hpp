@@ -50,6 +50,7 @@ class StartFinder {
   static constexpr std::array<std::uint8_t, sizeof...(kStarts)> kValues{kStarts...};
 
   const std::uint8_t* find(const std::uint8_t* from, std::uint8_t value) const {
+    if (from == end_) return end_;  // an empty span may have a null pointer, which memchr must not get
     const void* hit = std::memchr(from, value, static_cast<std::size_t>(end_ - from));
     return hit ? static_cast<const std::uint8_t*>(hit) : end_;
   }

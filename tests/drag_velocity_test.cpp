@@ -326,13 +326,31 @@ TEST(DragVelocityEstimator, RestartsTheDifferentiatorAfterAGapAndCarriesOn) {
   for (int axis = 0; axis < 2; ++axis) EXPECT_LT(std::abs(error[axis]), 3.0 * std::sqrt(first_after_gap->v_var[axis]));
 }
 
-TEST(DragVelocityEstimator, RefusesParamsWithoutDragAndBadConfigs) {
-  EXPECT_THROW(DragVelocityEstimator(FullModelParams{}, DragVelocityConfig{}), std::invalid_argument);
+TEST(DragVelocityEstimator, WithoutDragOnAnAxisCompensatesButReportsNoVelocity) {
+  const Flight flight = fly(5.0, 14);
   FullModelParams p = flight_params();
-  p.drag_linear.y() = 0.0;
+  p.drag_linear.y() = 0.0;  // y not identified yet
   p.drag_quadratic.y() = 0.0;
-  EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
-  p = flight_params();
+  DragVelocityEstimator partial(p, flight_config());
+  DragVelocityEstimator full(flight_params(), flight_config());
+  const Estimates rp = run(partial, flight.samples);
+  const Estimates rf = run(full, flight.samples);
+  ASSERT_EQ(rp.estimates.size(), rf.estimates.size());
+  ASSERT_FALSE(rp.estimates.empty());
+  for (std::size_t i = 0; i < rp.estimates.size(); ++i) {
+    EXPECT_EQ(rp.estimates[i].f, rf.estimates[i].f);  // compensation does not depend on drag
+    EXPECT_TRUE(std::isnan(rp.estimates[i].v.y()));
+    EXPECT_TRUE(std::isnan(rp.estimates[i].v_raw.y()));
+    EXPECT_TRUE(std::isfinite(rp.estimates[i].v.x()));
+  }
+  DragVelocityEstimator none(FullModelParams{}, flight_config());  // the defaults: nothing identified at all
+  const Estimates rn = run(none, flight.samples);
+  ASSERT_EQ(rn.estimates.size(), rf.estimates.size());
+  EXPECT_TRUE(rn.estimates.back().v.array().isNaN().all());
+}
+
+TEST(DragVelocityEstimator, RefusesBadParamsAndConfigs) {
+  FullModelParams p = flight_params();
   p.drag_linear.x() = -0.1;
   EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
   DragVelocityConfig c;

@@ -1,0 +1,383 @@
+#include "estimator/identify.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+#include <array>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+#include <utility>
+
+#include "estimator/constants.hpp"
+#include "estimator/velocity.hpp"
+
+namespace imubridge::estimator {
+namespace {
+
+constexpr double kDegree = kPi / 180.0;
+
+template <typename Enum, std::size_t N>
+Enum parse(std::string_view text, const std::array<std::pair<std::string_view, Enum>, N>& names, const char* what) {
+  std::string valid;
+  for (const auto& [spelling, value] : names) {
+    if (text == spelling) return value;
+    valid += (valid.empty() ? "" : ", ") + std::string(spelling);
+  }
+  throw std::invalid_argument("unknown " + std::string(what) + " \"" + std::string(text) + "\" (valid: " + valid + ")");
+}
+
+constexpr std::array<std::pair<std::string_view, ModelKind>, 2> kModels{
+    {{"paper", ModelKind::kPaper}, {"full", ModelKind::kFull}}};
+constexpr std::array<std::pair<std::string_view, Method>, 3> kMethods{
+    {{"ga", Method::kGa}, {"lm", Method::kLm}, {"ga+lm", Method::kGaLm}}};
+constexpr std::array<std::pair<std::string_view, VelocitySource>, 2> kVelocities{
+    {{"eq12", VelocitySource::kEq12}, {"reference", VelocitySource::kReference}}};
+
+template <typename Enum, std::size_t N>
+std::string_view spelling(Enum value, const std::array<std::pair<std::string_view, Enum>, N>& names) {
+  for (const auto& [text, v] : names) {
+    if (v == value) return text;
+  }
+  return "?";
+}
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The end of the data: the last sample's time plus its period, so that [start, end) holds the last sample.
+double data_end(std::span<const double> t) { return t.size() > 1 ? 2.0 * t.back() - t[t.size() - 2] : t.back(); }
+
+TimeWindow clip(const TimeWindow& w, std::span<const double> t, const char* what) {
+  const TimeWindow clipped{std::max(w.start, t.front()), std::min(w.end, data_end(t))};
+  const auto first = std::lower_bound(t.begin(), t.end(), clipped.start);
+  if (!(clipped.start < clipped.end) || first == t.end() || !(*first < clipped.end)) {
+    char message[200];
+    std::snprintf(message, sizeof message, "%s window %.3f:%.3f s holds no data (the data span %.3f:%.3f s)", what,
+                  w.start, w.end, t.front(), data_end(t));
+    throw std::invalid_argument(message);
+  }
+  return clipped;
+}
+
+void require_reference(const ImuSeries& series, const char* what) {
+  if (!series.reference) throw std::invalid_argument(std::string(what) + " needs a reference trajectory");
+}
+
+// The reference's velocity in body axes.
+std::vector<Eigen::Vector3d> reference_body_velocity(const ImuSeries& series) {
+  return body_velocity(series.reference->attitude, series.reference->velocity_ned);
+}
+
+// Eq. (12)'s 3-D generalisation: gyro-integrated attitude, thrust g along -z_b, no drag; body-axis velocity.
+std::vector<Eigen::Vector3d> dead_reckoned_body_velocity(std::span<const double> t,
+                                                         std::span<const Eigen::Vector3d> gyro_body) {
+  const std::vector<double> thrust(t.size(), kGravity);
+  const DeadReckoning dr = dead_reckon(t, gyro_body, thrust);
+  return body_velocity(dr.attitude, dr.velocity_ned);
+}
+
+// The slope of a least-squares polynomial (degree <= 3) through the samples within +-half_window of each sample,
+// in the local time u = (t_j - t_k) / half_window, which keeps the normal equations well conditioned.
+template <typename Value>
+std::vector<Value> cubic_slope(std::span<const double> t, std::span<const Value> x, double half_window) {
+  constexpr int kMaxDegree = 3;
+  if (t.size() != x.size()) throw std::invalid_argument("smoothed_derivative: t and x lengths differ");
+  if (!(half_window > 0.0)) throw std::invalid_argument("smoothed_derivative: the half window must be positive");
+  std::vector<Value> out(t.size(), Value::Zero());
+  std::size_t first = 0, last = 0;  // the window [first, last)
+  for (std::size_t k = 0; k < t.size(); ++k) {
+    while (t[k] - t[first] > half_window) ++first;
+    while (last < t.size() && t[last] - t[k] <= half_window) ++last;
+    const int degree = std::min(kMaxDegree, static_cast<int>(last - first) - 1);
+    if (degree < 1) continue;  // a lone sample: no slope to be had
+    Eigen::Matrix4d gram = Eigen::Matrix4d::Zero();
+    Eigen::Matrix<double, 4, Value::RowsAtCompileTime> moment =
+        Eigen::Matrix<double, 4, Value::RowsAtCompileTime>::Zero();
+    for (std::size_t j = first; j < last; ++j) {
+      const double u = (t[j] - t[k]) / half_window;
+      const Eigen::Vector4d powers(1.0, u, u * u, u * u * u);
+      gram += powers * powers.transpose();
+      moment += powers * x[j].transpose();
+    }
+    const int n = degree + 1;
+    const Eigen::MatrixXd c = gram.topLeftCorner(n, n).ldlt().solve(moment.topRows(n));
+    out[k] = c.row(1).transpose() / half_window;
+  }
+  return out;
+}
+
+std::vector<double> column(std::span<const PaperSample> samples, double PaperSample::*field) {
+  std::vector<double> out;
+  out.reserve(samples.size());
+  for (const PaperSample& s : samples) out.push_back(s.*field);
+  return out;
+}
+
+void record_uncertainty(const FitReport& report, Identification& id) {
+  const Uncertainty& u = report.uncertainty;
+  if (!u.failure.empty()) return;  // no standard errors to record
+  for (std::size_t i = 0; i < u.names.size(); ++i)
+    id.std_errors[report.name + "." + u.names[i]] = u.std_error[static_cast<Eigen::Index>(i)];
+}
+
+double wrap_angle(double a) { return std::remainder(a, 2.0 * kPi); }
+
+FitReport identify_paper_axis(const std::vector<PaperSample>& samples, const Windows& w, const IdentifyOptions& o,
+                              const std::string& name, PaperAxisParams& p, Identification& id) {
+  const std::span<const PaperSample> fit = select(samples, w.train);
+  const std::span<const PaperSample> validation = select(samples, w.validate);
+  FitReport report{.name = name, .fit_samples = fit.size(), .validation_samples = validation.size()};
+  const auto start = std::chrono::steady_clock::now();
+  if (o.method != Method::kLm) {
+    const GaResult ga = minimize_ga(
+        [fit](std::span<const double> g) {
+          return objective({g[0], g[1], g[2], g[3]}, fit);
+        },
+        paper_bounds(), o.ga);
+    p = {ga.best[0], ga.best[1], ga.best[2], ga.best[3]};
+    report.convergence = ga.convergence;
+  }
+  if (o.method != Method::kGa) {
+    const PaperFit lm = fit_paper_lm(fit, o.method == Method::kLm ? paper_linear_fit(fit) : p);
+    p = lm.params;
+    p.beta = wrap_angle(p.beta);
+    report.lm = lm.report;
+  }
+  report.solve_seconds = seconds_since(start);
+  report.fit_objective = objective(p, fit);
+  report.uncertainty = paper_uncertainty(fit, p);
+  id.rmse[name + ".fit"] = rmse(p, fit);
+  id.rmse[name + ".validation"] = rmse(p, validation);
+  record_uncertainty(report, id);
+  return report;
+}
+
+// One coordinate of FullModelParams that the GA searches, with its box.
+struct Gene {
+  int block, index;
+  double lower, upper;
+};
+
+std::vector<Gene> full_genes(const FullHold& hold) {
+  // Generous for a small multirotor: IMU within 0.5 m of the mass centre, mounted within 11 degrees of the body
+  // axes, drag well beyond the paper's, accelerometer bias within 0.2 g.
+  constexpr std::array<std::pair<double, double>, kFullBlocks> kBox{
+      {{-0.5, 0.5}, {-0.2, 0.2}, {0.0, 2.0}, {0.0, 1.0}, {-2.0, 2.0}}};
+  std::vector<Gene> genes;
+  for (int b = 0; b < kFullBlocks; ++b) {
+    if (hold.blocks[b]) continue;
+    // The bias's z is held (least_squares.hpp).
+    const int size = static_cast<FullBlock>(b) == FullBlock::kAccelBias ? 2 : kFullBlockSizes[b];
+    for (int i = 0; i < size; ++i) genes.push_back({b, i, kBox[b].first, kBox[b].second});
+  }
+  return genes;
+}
+
+FullModelParams from_genes(std::span<const double> g, const std::vector<Gene>& genes, FullModelParams p) {
+  const auto blocks = parameter_blocks(p);
+  for (std::size_t i = 0; i < genes.size(); ++i) blocks[genes[i].block][genes[i].index] = g[i];
+  return p;
+}
+
+FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w, const IdentifyOptions& o,
+                        FullModelParams& p, Identification& id) {
+  const std::span<const FullSample> fit = select(samples, w.train);
+  const std::span<const FullSample> validation = select(samples, w.validate);
+  FitReport report{.name = "full", .fit_samples = fit.size(), .validation_samples = validation.size()};
+  const auto start = std::chrono::steady_clock::now();
+  p = FullModelParams{};  // LM starts with the IMU at the mass centre, aligned, no drag, no bias
+  if (o.method != Method::kLm) {
+    const std::vector<Gene> genes = full_genes(o.hold);
+    GaBounds bounds;
+    for (const Gene& gene : genes) {
+      bounds.lower.push_back(gene.lower);
+      bounds.upper.push_back(gene.upper);
+    }
+    const GaResult ga = minimize_ga(
+        [&](std::span<const double> g) { return full_objective(from_genes(g, genes, p), fit); }, bounds, o.ga);
+    p = from_genes(ga.best, genes, p);
+    report.convergence = ga.convergence;
+  }
+  if (o.method != Method::kGa) {
+    const FullFit lm = fit_full_lm(fit, p, o.hold);
+    p = lm.params;
+    report.lm = lm.report;
+  }
+  report.solve_seconds = seconds_since(start);
+  report.fit_objective = full_objective(p, fit);
+  report.uncertainty = full_uncertainty(fit, p, o.hold);
+  const Eigen::Vector2d fit_rmse = full_rmse(p, fit), validation_rmse = full_rmse(p, validation);
+  id.rmse["full.x.fit"] = fit_rmse.x();
+  id.rmse["full.y.fit"] = fit_rmse.y();
+  id.rmse["full.x.validation"] = validation_rmse.x();
+  id.rmse["full.y.validation"] = validation_rmse.y();
+  record_uncertainty(report, id);
+  return report;
+}
+
+struct ErrorSum {
+  Eigen::Vector2d squares = Eigen::Vector2d::Zero();
+  void add(const Eigen::Vector2d& error) { squares += error.cwiseAbs2(); }
+  VelocityError rmse(std::size_t n) const {
+    const Eigen::Vector2d mean = squares / static_cast<double>(n);
+    return {mean.cwiseSqrt(), std::sqrt(mean.sum())};
+  }
+};
+
+}  // namespace
+
+std::string_view name(ModelKind model) { return spelling(model, kModels); }
+std::string_view name(Method method) { return spelling(method, kMethods); }
+std::string_view name(VelocitySource velocity) { return spelling(velocity, kVelocities); }
+ModelKind parse_model(std::string_view text) { return parse(text, kModels, "model"); }
+Method parse_method(std::string_view text) { return parse(text, kMethods, "method"); }
+VelocitySource parse_velocity(std::string_view text) { return parse(text, kVelocities, "velocity source"); }
+
+TimeWindow parse_window(std::string_view text) {
+  const auto number = [text](std::string_view piece, double& x) {
+    const auto [end, error] = std::from_chars(piece.data(), piece.data() + piece.size(), x);
+    return error == std::errc() && end == piece.data() + piece.size() && std::isfinite(x);
+  };
+  const std::size_t colon = text.find(':');
+  TimeWindow w{0.0, std::numeric_limits<double>::infinity()};
+  const bool ok = colon != std::string_view::npos && number(text.substr(0, colon), w.start) &&
+                  (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) && w.start < w.end;
+  if (!ok)
+    throw std::invalid_argument("bad window \"" + std::string(text) +
+                                "\": expected T0:T1 (or T0: to the end), seconds, T0 < T1");
+  return w;
+}
+
+Windows resolve_windows(std::span<const double> t, const std::optional<TimeWindow>& train,
+                        const std::optional<TimeWindow>& validate) {
+  if (t.empty()) throw std::invalid_argument("no samples to identify from");
+  constexpr double kForever = std::numeric_limits<double>::infinity();
+  const TimeWindow train_window = train.value_or(TimeWindow{0.0, kPaperTrainSeconds});
+  const TimeWindow validate_window = validate.value_or(TimeWindow{train_window.end, kForever});
+  return {clip(train_window, t, "training"), clip(validate_window, t, "validation")};
+}
+
+std::vector<Eigen::Vector3d> smoothed_derivative(std::span<const double> t, std::span<const Eigen::Vector3d> x,
+                                                 double half_window) {
+  return cubic_slope(t, x, half_window);
+}
+
+std::vector<PaperSample> prepare_paper(const ImuSeries& series, PaperAxis axis, VelocitySource velocity,
+                                       double half_window) {
+  std::vector<PaperSample> samples = prepare_paper_axis(series, axis);
+  // omega is already in the axis's frame (roll: -omega_x), so its derivative needs no mapping of its own.
+  const std::vector<double> t = column(samples, &PaperSample::t);
+  std::vector<Eigen::Matrix<double, 1, 1>> omega(samples.size());
+  for (std::size_t k = 0; k < samples.size(); ++k) omega[k][0] = samples[k].omega;
+  const auto omega_dot = cubic_slope<Eigen::Matrix<double, 1, 1>>(t, omega, half_window);
+  for (std::size_t k = 0; k < samples.size(); ++k) samples[k].omega_dot = omega_dot[k][0];
+  if (velocity == VelocitySource::kReference) {
+    require_reference(series, "velocity from the reference");
+    // The axis's x' is x_b for pitch and y_b for roll; the paper's v is minus the velocity along it.
+    const int along = axis == PaperAxis::kPitch ? 0 : 1;
+    const std::vector<Eigen::Vector3d> v_body = reference_body_velocity(series);
+    for (std::size_t k = 0; k < samples.size(); ++k) samples[k].v = -v_body[k][along];
+  }
+  return samples;
+}
+
+std::vector<FullSample> prepare_full(const ImuSeries& series, VelocitySource velocity, double half_window) {
+  require_valid(series);
+  const std::vector<Eigen::Vector3d> gyro_rate = smoothed_derivative(series.t, series.gyro, half_window);
+  std::vector<Eigen::Vector3d> v_body;
+  if (velocity == VelocitySource::kReference) {
+    require_reference(series, "velocity from the reference");
+    v_body = reference_body_velocity(series);
+  } else {
+    v_body = dead_reckoned_body_velocity(series.t, series.gyro);  // the mounting is not known yet: gyro as body
+  }
+  std::vector<FullSample> samples(series.size());
+  for (std::size_t k = 0; k < samples.size(); ++k)
+    samples[k] = {series.t[k], series.gyro[k], gyro_rate[k], series.accel[k], v_body[k].head<2>()};
+  return samples;
+}
+
+GaBounds paper_bounds() { return {{0.0, -kPi, -15.0 * kDegree, 0.0}, {0.5, kPi, 15.0 * kDegree, 1.0}}; }
+
+FullModelParams full_from_paper(const PaperAxisParams& pitch, const PaperAxisParams& roll) {
+  FullModelParams p;
+  // Pitch: the IMU at r (cos b, 0, -sin b); roll: at r (0, cos b, -sin b). Both see the height; take the mean.
+  p.lever_arm = {pitch.r * std::cos(pitch.beta), roll.r * std::cos(roll.beta),
+                 -0.5 * (pitch.r * std::sin(pitch.beta) + roll.r * std::sin(roll.beta))};
+  p.mounting = {-roll.alpha, pitch.alpha, 0.0};
+  p.drag_quadratic = {pitch.mu, roll.mu};
+  return p;
+}
+
+IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
+  require_valid(series);
+  if (o.velocity == VelocitySource::kReference) require_reference(series, "velocity from the reference");
+  if (o.model == ModelKind::kFull && std::all_of(o.hold.blocks.begin(), o.hold.blocks.end(), [](bool h) { return h; }))
+    throw std::invalid_argument("every block of the 3-D model is held: nothing to identify");
+  const Windows windows = resolve_windows(series.t, o.train, o.validate);
+  IdentifyResult result;
+  Identification& id = result.params.identification;
+  id.method = name(o.method);
+  id.seed = o.method == Method::kLm ? 0 : o.ga.seed;
+  id.fit_windows = {windows.train};
+  id.validation_windows = {windows.validate};
+  if (o.model == ModelKind::kPaper) {
+    for (const PaperAxis axis : {PaperAxis::kPitch, PaperAxis::kRoll}) {
+      const bool pitch = axis == PaperAxis::kPitch;
+      PaperAxisParams& p = pitch ? result.params.paper_x : result.params.paper_y;
+      const auto samples = prepare_paper(series, axis, o.velocity, o.derivative_half_window);
+      result.fits.push_back(identify_paper_axis(samples, windows, o, pitch ? "paper.x" : "paper.y", p, id));
+    }
+    result.params.full = full_from_paper(result.params.paper_x, result.params.paper_y);
+  } else {
+    const auto samples = prepare_full(series, o.velocity, o.derivative_half_window);
+    result.fits.push_back(identify_full(samples, windows, o, result.params.full, id));
+  }
+  return result;
+}
+
+VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
+                                     const std::optional<TimeWindow>& window, const DragVelocityConfig& config) {
+  require_valid(series);
+  require_reference(series, "evaluating the velocity");
+  if (series.size() == 0) throw std::invalid_argument("no samples to evaluate");
+  DragVelocityEstimator estimator(params, config);
+  if (!estimator.has_drag(0) || !estimator.has_drag(1))
+    throw std::invalid_argument("evaluating the velocity needs drag identified on both horizontal axes");
+  VelocityEvaluation out;
+  out.window = clip(window.value_or(TimeWindow{series.t.front(), data_end(series.t)}), series.t, "evaluation");
+
+  const std::vector<Eigen::Vector3d> truth = reference_body_velocity(series);
+  const LeverArmCompensator imu_to_body(params);  // for its mounting rotation
+  std::vector<Eigen::Vector3d> gyro_body(series.size());
+  for (std::size_t k = 0; k < series.size(); ++k) gyro_body[k] = imu_to_body.to_body(series.gyro[k]);
+  const std::vector<Eigen::Vector3d> open_loop = dead_reckoned_body_velocity(series.t, gyro_body);
+
+  ErrorSum filter, inversion, eq12, zero;
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    const std::optional<DragVelocityEstimate> e = estimator.update(series.sample(k));
+    if (!e || e->t < out.window.start || !(e->t < out.window.end)) continue;
+    // The estimate describes an earlier sample (the differentiator's delay): score it against that one.
+    const auto i =
+        static_cast<std::size_t>(std::lower_bound(series.t.begin(), series.t.end(), e->t) - series.t.begin());
+    const Eigen::Vector2d v = truth[i].head<2>();
+    filter.add(e->v - v);
+    inversion.add(e->v_raw - v);
+    eq12.add(open_loop[i].head<2>() - v);
+    zero.add(-v);
+    ++out.samples;
+  }
+  if (out.samples == 0) throw std::invalid_argument("no estimates inside the evaluation window");
+  out.estimator = filter.rmse(out.samples);
+  out.inversion = inversion.rmse(out.samples);
+  out.eq12 = eq12.rmse(out.samples);
+  out.zero = zero.rmse(out.samples);
+  out.counters = estimator.counters();
+  return out;
+}
+
+}  // namespace imubridge::estimator

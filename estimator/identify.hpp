@@ -1,0 +1,148 @@
+#pragma once
+// Identification of the accelerometer model from a flight (docs/identification.md): the fit and validation windows,
+// the data preparation (angular acceleration, the drag term's velocity), running a method (the paper's GA,
+// Levenberg-Marquardt, or the GA polished by LM) and the results that go into PARAMS.json. Also the evaluation of
+// the drag-velocity estimator against a reference, which is how identified parameters are judged.
+#include <Eigen/Core>
+#include <algorithm>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "estimator/cost_functors.hpp"
+#include "estimator/drag_velocity.hpp"
+#include "estimator/ga.hpp"
+#include "estimator/imu_series.hpp"
+#include "estimator/least_squares.hpp"
+#include "estimator/paper_model.hpp"
+#include "estimator/params.hpp"
+
+namespace imubridge::estimator {
+
+enum class ModelKind { kPaper, kFull };           // "paper": eq. (14) per axis; "full": the 3-D model
+enum class Method { kGa, kLm, kGaLm };            // "ga", "lm", "ga+lm"
+enum class VelocitySource { kEq12, kReference };  // "eq12": eq. (12) (3-D: dead_reckon); "reference"
+
+std::string_view name(ModelKind model);
+std::string_view name(Method method);
+std::string_view name(VelocitySource velocity);
+// Throw std::invalid_argument naming the valid spellings.
+ModelKind parse_model(std::string_view text);
+Method parse_method(std::string_view text);
+VelocitySource parse_velocity(std::string_view text);
+
+// The paper's split: the first 33 s identify, the rest validate (section VII).
+inline constexpr double kPaperTrainSeconds = 33.0;
+
+struct IdentifyOptions {
+  ModelKind model = ModelKind::kPaper;
+  Method method = Method::kLm;
+  VelocitySource velocity = VelocitySource::kEq12;
+  std::optional<TimeWindow> train;     // default [0, 33) s
+  std::optional<TimeWindow> validate;  // default from the end of `train` to the end of the data
+  GaOptions ga;
+  FullHold hold;  // 3-D model: blocks kept at their defaults
+  // s, see smoothed_derivative(). About 30 ms, but not a multiple of the usual sample periods (1/100 .. 1/1000 s),
+  // so that no sample sits on the window's edge, where rounding in the timestamps would decide whether it counts.
+  double derivative_half_window = 0.0315;
+};
+
+// ---- windows ----
+
+// "T0:T1" in seconds of session time; "T0:" runs to the end of the data. Throws std::invalid_argument otherwise.
+TimeWindow parse_window(std::string_view text);
+
+struct Windows {
+  TimeWindow train, validate;
+};
+// The windows clipped to the data, [t_0, t_last + last period). Throws std::invalid_argument naming the window and
+// the data's span when one is empty after clipping.
+Windows resolve_windows(std::span<const double> t, const std::optional<TimeWindow>& train,
+                        const std::optional<TimeWindow>& validate);
+
+// The samples with window.start <= t < window.end (samples are in time order).
+template <typename Sample>
+std::span<const Sample> select(const std::vector<Sample>& samples, const TimeWindow& window) {
+  const auto before = [](const Sample& s, double t) { return s.t < t; };
+  const auto first = std::lower_bound(samples.begin(), samples.end(), window.start, before);
+  return {first, std::lower_bound(first, samples.end(), window.end, before)};
+}
+
+// ---- data preparation ----
+
+// Offline angular acceleration: at each sample, the slope of a cubic least-squares fit to the samples within
+// +-half_window of it, against their own timestamps (the degree drops where fewer than 4 samples are in reach: ends,
+// gaps). Its centre is the sample itself, so there is no delay. A cubic passes the manoeuvres' content that a
+// straight-line fit of the same width would flatten, and averages the gyro's noise far better than the central
+// difference; docs/identification.md has the numbers. Throws std::invalid_argument for lengths that differ or a
+// half window that is not positive.
+std::vector<Eigen::Vector3d> smoothed_derivative(std::span<const double> t, std::span<const Eigen::Vector3d> x,
+                                                 double half_window);
+
+// One axis's eq. (14) signals: omega, theta, f as prepare_paper_axis(), omega_dot from smoothed_derivative(), v from
+// eq. (12) or from the reference (minus the body-axis velocity along the axis: the paper's sign).
+std::vector<PaperSample> prepare_paper(const ImuSeries& series, PaperAxis axis, VelocitySource velocity,
+                                       double half_window);
+// The 3-D model's inputs: the body-axis horizontal velocity from dead_reckon() (gyro taken as body rates, T = g:
+// eq. 12's generalisation) or from the reference.
+std::vector<FullSample> prepare_full(const ImuSeries& series, VelocitySource velocity, double half_window);
+
+// ---- running a method ----
+
+// One fitted group of parameters: a paper axis ("paper.x", "paper.y") or the 3-D model ("full").
+struct FitReport {
+  std::string name{};
+  Uncertainty uncertainty{};          // parameter names relative to `name`
+  std::vector<double> convergence{};  // GA: best OF after each generation (the paper's Fig. 12); else empty
+  std::optional<SolverReport> lm{};   // when LM ran
+  double fit_objective = 0.0;         // OF, eq. (15), on the fit window, m/s^2
+  std::size_t fit_samples = 0, validation_samples = 0;
+  double solve_seconds = 0.0;  // wall time of the optimiser(s) alone
+};
+
+struct IdentifyResult {
+  ModelParams params;  // values, and in params.identification the method, seed, windows, std errors and RMSEs
+  std::vector<FitReport> fits;
+};
+
+// The paper model fits both axes (pitch -> paper.x, roll -> paper.y) and derives params.full from them
+// (full_from_paper) for the live estimator; the 3-D model fills params.full. Throws std::invalid_argument for an
+// invalid series, empty windows, too few samples, or velocity from a reference the series does not have.
+IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& options);
+
+// The GA's search box for one paper axis: r in [0, 0.5] m, beta in [-180, 180] deg, alpha in [-15, 15] deg,
+// mu in [0, 1] 1/m.
+GaBounds paper_bounds();
+
+// The 3-D parameters the two paper axes describe: lever arm (r_x cos b_x, r_y cos b_y, mean of -r sin b),
+// mounting (-alpha_y, alpha_x, 0), quadratic drag (mu_x, mu_y), no linear drag, no bias (docs/identification.md).
+FullModelParams full_from_paper(const PaperAxisParams& pitch, const PaperAxisParams& roll);
+
+// ---- judging the drag-velocity estimator ----
+
+// RMSE against the reference's body-axis horizontal velocity, m/s, per axis and of the horizontal error vector.
+struct VelocityError {
+  Eigen::Vector2d axis = Eigen::Vector2d::Zero();
+  double horizontal = 0.0;
+};
+
+struct VelocityEvaluation {
+  TimeWindow window;
+  std::size_t samples = 0;  // samples scored: in the window and with an estimate
+  VelocityError estimator;  // the drag-velocity Kalman filter
+  VelocityError inversion;  // the drag law inverted sample by sample (the filter's measurement)
+  VelocityError eq12;       // open-loop integration: dead_reckon(), eq. (12)'s 3-D generalisation
+  VelocityError zero;       // "not moving": the reference's own RMS speed
+  DragVelocityCounters counters;
+};
+
+// Runs DragVelocityEstimator over the whole series (its state needs the flight's start) and scores the samples in
+// `window` (default: all). Throws std::invalid_argument without a reference, for params the estimator refuses, for
+// an axis without drag (no velocity to score) or for an empty window.
+VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
+                                     const std::optional<TimeWindow>& window = std::nullopt,
+                                     const DragVelocityConfig& config = {});
+
+}  // namespace imubridge::estimator

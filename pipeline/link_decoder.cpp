@@ -1,0 +1,191 @@
+#include "pipeline/link_decoder.hpp"
+
+#include <array>
+#include <map>
+#include <stdexcept>
+#include <variant>
+
+#include "protocol/imu_frame.hpp"
+#include "protocol/mavlink.hpp"
+#include "protocol/xbee.hpp"
+#include "protocol/xbee_imu_reassembler.hpp"
+
+namespace imubridge::pipeline {
+namespace {
+
+// MAVLink numbers messages per sending component with 8 bits; a sample's sequence is that number unwrapped.
+class MavlinkSequences {
+ public:
+  std::uint64_t unwrap(const protocol::mavlink::Message& m) {
+    auto [it, first] = last_.try_emplace(static_cast<std::uint16_t>(m.sysid << 8 | m.compid), m.seq);
+    if (!first) it->second += static_cast<std::uint8_t>(m.seq - static_cast<std::uint8_t>(it->second));
+    return it->second;
+  }
+
+ private:
+  std::map<std::uint16_t, std::uint64_t> last_;
+};
+
+struct ImuLink {
+  protocol::imu::Decoder decoder;
+  std::vector<protocol::imu::Frame> frames;
+};
+
+struct XbeeLink {
+  explicit XbeeLink(protocol::xbee::ApiMode mode) : decoder(mode) {}
+  protocol::xbee::Decoder decoder;
+  protocol::XbeeImuReassembler reassembler;
+  std::vector<protocol::xbee::Frame> frames;
+  std::vector<protocol::XbeeImuReassembler::SourcedFrame> imu_frames;
+};
+
+struct MavlinkLink {
+  protocol::mavlink::Decoder decoder;
+  MavlinkSequences sequences;
+  std::vector<protocol::mavlink::Message> messages;
+};
+
+}  // namespace
+
+struct LinkDecoder::Impl {
+  protocol::WireFormat format;
+  std::uint32_t link_id;
+  protocol::Calibration calibration;
+  SourceResolver resolve_source;
+  std::variant<ImuLink, XbeeLink, MavlinkLink> link;
+  std::uint64_t frames_without_sample = 0;
+
+  void emit(const protocol::imu::Frame& frame, std::uint32_t link, std::int64_t t,
+            std::vector<protocol::Sample>& out) {
+    if (auto sample = protocol::to_sample(frame, calibration, link, t)) {
+      out.push_back(*sample);
+    } else {
+      ++frames_without_sample;
+    }
+  }
+
+  void take(ImuLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
+    for (const auto& frame : l.frames) emit(frame, link_id, t, out);
+  }
+
+  void take(XbeeLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
+    for (const auto& frame : l.frames) {
+      const auto* rx = std::get_if<protocol::xbee::RxPacket>(&frame.body);
+      if (rx == nullptr) {  // TX status and the like: link management, not measurements
+        ++frames_without_sample;
+        continue;
+      }
+      l.imu_frames.clear();
+      l.reassembler.on_rx(*rx, l.imu_frames);
+      take_sourced(l, t, out);
+    }
+  }
+
+  void take_sourced(XbeeLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
+    for (const auto& sourced : l.imu_frames) {
+      emit(sourced.frame, resolve_source ? resolve_source(sourced.source64) : link_id, t, out);
+    }
+  }
+
+  void take(MavlinkLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
+    for (const auto& message : l.messages) {
+      const std::uint64_t sequence = l.sequences.unwrap(message);
+      auto sample = protocol::mavlink::to_sample(message, &calibration);
+      if (!sample) {
+        ++frames_without_sample;
+        continue;
+      }
+      sample->link_id = link_id;
+      sample->seq = sequence;
+      sample->recv_mono_ns = t;
+      out.push_back(*sample);
+    }
+  }
+};
+
+LinkDecoder::LinkDecoder(protocol::WireFormat format, std::uint32_t link_id, const protocol::Calibration& calibration,
+                         SourceResolver resolve_source)
+    : impl_(std::make_unique<Impl>(Impl{format, link_id, calibration, std::move(resolve_source), ImuLink{}, 0})) {
+  if (!calibration.valid()) throw std::invalid_argument("invalid calibration (axis map, signs or scales)");
+  switch (format) {
+    case protocol::WireFormat::imubridge:
+      break;
+    case protocol::WireFormat::xbee:
+      impl_->link.emplace<XbeeLink>(protocol::xbee::ApiMode::unescaped);
+      break;
+    case protocol::WireFormat::xbee_escaped:
+      impl_->link.emplace<XbeeLink>(protocol::xbee::ApiMode::escaped);
+      break;
+    case protocol::WireFormat::mavlink:
+      impl_->link.emplace<MavlinkLink>();
+      break;
+  }
+}
+
+LinkDecoder::~LinkDecoder() = default;
+LinkDecoder::LinkDecoder(LinkDecoder&&) noexcept = default;
+LinkDecoder& LinkDecoder::operator=(LinkDecoder&&) noexcept = default;
+
+void LinkDecoder::feed(std::span<const std::uint8_t> chunk, std::int64_t recv_mono_ns,
+                       std::vector<protocol::Sample>& out) {
+  std::visit(
+      [&](auto& l) {
+        using L = std::decay_t<decltype(l)>;
+        if constexpr (std::is_same_v<L, ImuLink>) {
+          l.frames.clear();
+          l.decoder.feed(chunk, l.frames);
+        } else if constexpr (std::is_same_v<L, XbeeLink>) {
+          l.frames.clear();
+          l.decoder.feed(chunk, l.frames);
+        } else {
+          l.messages.clear();
+          l.decoder.feed(chunk, l.messages);
+        }
+        impl_->take(l, recv_mono_ns, out);
+      },
+      impl_->link);
+}
+
+void LinkDecoder::finish(std::int64_t recv_mono_ns, std::vector<protocol::Sample>& out) {
+  std::visit(
+      [&](auto& l) {
+        using L = std::decay_t<decltype(l)>;
+        if constexpr (std::is_same_v<L, ImuLink>) {
+          l.frames.clear();
+          l.decoder.finish(l.frames);
+          impl_->take(l, recv_mono_ns, out);
+        } else if constexpr (std::is_same_v<L, XbeeLink>) {
+          l.frames.clear();
+          l.decoder.finish(l.frames);
+          impl_->take(l, recv_mono_ns, out);
+          l.imu_frames.clear();
+          l.reassembler.finish(l.imu_frames);  // each radio's unfinished tail
+          impl_->take_sourced(l, recv_mono_ns, out);
+        } else {
+          l.messages.clear();
+          l.decoder.finish(l.messages);
+          impl_->take(l, recv_mono_ns, out);
+        }
+      },
+      impl_->link);
+}
+
+std::vector<std::pair<std::string, protocol::DecoderCounters>> LinkDecoder::counters() const {
+  return std::visit(
+      [](const auto& l) -> std::vector<std::pair<std::string, protocol::DecoderCounters>> {
+        using L = std::decay_t<decltype(l)>;
+        if constexpr (std::is_same_v<L, ImuLink>) {
+          return {{"imubridge", l.decoder.counters()}};
+        } else if constexpr (std::is_same_v<L, XbeeLink>) {
+          return {{"xbee", l.decoder.counters()}, {"imubridge", l.reassembler.counters()}};
+        } else {
+          return {{"mavlink", l.decoder.counters()}};
+        }
+      },
+      impl_->link);
+}
+
+std::uint64_t LinkDecoder::frames_without_sample() const { return impl_->frames_without_sample; }
+protocol::WireFormat LinkDecoder::format() const { return impl_->format; }
+
+}  // namespace imubridge::pipeline

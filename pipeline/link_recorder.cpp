@@ -1,0 +1,74 @@
+#include "pipeline/link_recorder.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include "protocol/hex.hpp"
+
+namespace imubridge::pipeline {
+namespace {
+
+protocol::DecoderCounters total(const LinkDecoder& decoder) {
+  protocol::DecoderCounters sum;
+  for (const auto& [layer, counters] : decoder.counters()) sum += counters;
+  return sum;
+}
+
+}  // namespace
+
+LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64_t link_id, std::string link_name,
+                           protocol::WireFormat format, const protocol::Calibration& calibration)
+    : store_(store),
+      session_(session),
+      link_id_(link_id),
+      link_name_(std::move(link_name)),
+      format_name_(protocol::wire_format_name(format)),
+      decoder_(format, static_cast<std::uint32_t>(link_id), calibration, [this](std::uint64_t source64) {
+        auto [it, added] = radio_links_.try_emplace(source64, 0);
+        if (added) it->second = store_.add_link(session_, link_name_ + "/" + protocol::hex(source64, 8), format_name_,
+                                                "XBee radio " + protocol::hex(source64, 8) + " via " + link_name_);
+        return static_cast<std::uint32_t>(it->second);
+      }) {}
+
+void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns,
+                            std::int64_t recv_wall_ns, std::vector<protocol::Sample>& samples) {
+  store_.append_chunk(session_, link_id_, store::Direction::rx, recv_mono_ns, recv_wall_ns, bytes);
+  const std::size_t first = samples.size();
+  decoder_.feed(bytes, recv_mono_ns, samples);
+  store_samples(first, samples);
+  record_losses(recv_mono_ns, recv_wall_ns);
+}
+
+void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& samples) {
+  const std::size_t first = samples.size();
+  decoder_.finish(mono_ns, samples);
+  store_samples(first, samples);
+  record_losses(mono_ns, wall_ns);
+  nlohmann::json counters;
+  for (const auto& [layer, c] : decoder_.counters()) counters[layer] = c;
+  counters["frames_without_sample"] = decoder_.frames_without_sample();
+  store_.append_event(session_, {.link_id = link_id_, .mono_ns = mono_ns, .wall_ns = wall_ns, .kind = "counters",
+                                 .count = 1, .detail = counters.dump()});
+}
+
+void LinkRecorder::store_samples(std::size_t first, const std::vector<protocol::Sample>& samples) {
+  for (std::size_t i = first; i < samples.size(); ++i) store_.append_sample(session_, samples[i]);
+}
+
+// Every loss the decoders counted since the last chunk becomes an event with its count, so a session's losses can
+// be read from the store without re-decoding it.
+void LinkRecorder::record_losses(std::int64_t mono_ns, std::int64_t wall_ns) {
+  const protocol::DecoderCounters now = total(decoder_);
+  const auto record = [&](const char* kind, std::uint64_t before, std::uint64_t after, const char* unit) {
+    if (after == before) return;
+    const auto count = static_cast<std::int64_t>(after - before);
+    store_.append_event(session_, {.link_id = link_id_, .mono_ns = mono_ns, .wall_ns = wall_ns, .kind = kind,
+                                   .count = count, .detail = std::to_string(count) + " " + unit});
+  };
+  record("sequence_gap", recorded_.frames_lost, now.frames_lost, "frames missing by sequence number");
+  record("crc_failure", recorded_.crc_failures, now.crc_failures, "frames failed their CRC/checksum");
+  record("bytes_discarded", recorded_.bytes_discarded, now.bytes_discarded, "bytes outside any valid frame");
+  record("duplicate", recorded_.duplicates, now.duplicates, "repeated frames dropped");
+  recorded_ = now;
+}
+
+}  // namespace imubridge::pipeline

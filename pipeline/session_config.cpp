@@ -1,0 +1,75 @@
+#include "pipeline/session_config.hpp"
+
+#include <stdexcept>
+
+namespace imubridge::pipeline {
+namespace {
+
+using nlohmann::json;
+
+json axis_to_json(const protocol::AxisCalibration& a) {
+  return {{"scale", a.scale}, {"offset", a.offset}, {"source_axis", a.source_axis}, {"sign", a.sign}};
+}
+
+protocol::AxisCalibration axis_from_json(const json& j, const char* name) {
+  protocol::AxisCalibration a;
+  try {
+    j.at("scale").get_to(a.scale);
+    j.at("offset").get_to(a.offset);
+    j.at("source_axis").get_to(a.source_axis);
+    j.at("sign").get_to(a.sign);
+  } catch (const json::exception& e) {
+    throw std::invalid_argument(std::string("calibration.") + name + ": " + e.what());
+  }
+  if (!a.valid()) throw std::invalid_argument(std::string("calibration.") + name + " is not a valid calibration");
+  return a;
+}
+
+}  // namespace
+
+json calibration_to_json(const protocol::Calibration& c) {
+  return {{"accel", axis_to_json(c.accel)},
+          {"gyro", axis_to_json(c.gyro)},
+          {"mag", axis_to_json(c.mag)},
+          {"temperature_scale", c.temperature_scale},
+          {"temperature_offset_c", c.temperature_offset_c}};
+}
+
+protocol::Calibration calibration_from_json(const json& j) {
+  protocol::Calibration c;
+  c.accel = axis_from_json(j.at("accel"), "accel");
+  c.gyro = axis_from_json(j.at("gyro"), "gyro");
+  c.mag = axis_from_json(j.at("mag"), "mag");
+  c.temperature_scale = j.at("temperature_scale").get<double>();
+  c.temperature_offset_c = j.at("temperature_offset_c").get<double>();
+  return c;
+}
+
+void add_recorded_links(json& config, const std::vector<RecordedLink>& links) {
+  json& out = config["links"] = json::array();
+  for (const auto& link : links) {
+    out.push_back({{"name", link.name},
+                   {"protocol", protocol::wire_format_name(link.format)},
+                   {"calibration", calibration_to_json(link.calibration)}});
+  }
+}
+
+std::vector<RecordedLink> recorded_links(const std::string& session_config_json) {
+  const json config = json::parse(session_config_json, nullptr, /*allow_exceptions=*/false);
+  if (config.is_discarded() || !config.contains("links") || !config["links"].is_array()) {
+    throw std::invalid_argument("the session's config snapshot records no links (not written by imubridge?)");
+  }
+  std::vector<RecordedLink> links;
+  for (const auto& j : config["links"]) {
+    try {
+      links.push_back({j.at("name").get<std::string>(),
+                       protocol::parse_wire_format(j.at("protocol").get<std::string>()),
+                       calibration_from_json(j.at("calibration"))});
+    } catch (const json::exception& e) {
+      throw std::invalid_argument(std::string("session config, links: ") + e.what());
+    }
+  }
+  return links;
+}
+
+}  // namespace imubridge::pipeline

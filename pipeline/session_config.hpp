@@ -1,0 +1,30 @@
+#pragma once
+// What a session must remember to be decoded again: for each recorded link, its wire format and the calibration
+// that turned its counts into SI values. Every writer of sessions (the daemon, the simulator, imports) puts this
+// under "links" in the session's config snapshot, and replay reads it back from there.
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+#include "protocol/calibration.hpp"
+#include "protocol/wire_format.hpp"
+
+namespace imubridge::pipeline {
+
+struct RecordedLink {
+  std::string name;  // the store link's name
+  protocol::WireFormat format = protocol::WireFormat::imubridge;
+  protocol::Calibration calibration = protocol::Calibration::reference_board();
+};
+
+nlohmann::json calibration_to_json(const protocol::Calibration& c);
+// Throws std::invalid_argument naming the bad field.
+protocol::Calibration calibration_from_json(const nlohmann::json& j);
+
+// {"links": [{"name": .., "protocol": .., "calibration": {..}}, ...]} merged into `config`.
+void add_recorded_links(nlohmann::json& config, const std::vector<RecordedLink>& links);
+// Throws std::invalid_argument when the snapshot has no usable "links".
+std::vector<RecordedLink> recorded_links(const std::string& session_config_json);
+
+}  // namespace imubridge::pipeline

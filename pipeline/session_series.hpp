@@ -1,0 +1,42 @@
+#pragma once
+// A recorded session as the estimator's input: one link's samples as an estimator::ImuSeries, timed by the IMU's
+// own clock, with the session's reference trajectory interpolated at each sample when asked for
+// (docs/identification.md, "Session time").
+#include <cstdint>
+#include <optional>
+
+#include "estimator/imu_series.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::pipeline {
+
+struct SessionSeriesOptions {
+  std::optional<std::int64_t> link{};  // default: the session's link with the most samples
+  bool reference = false;              // interpolate the reference trajectory at every sample
+};
+
+// What was read and what was left out, and why. Nothing is dropped silently.
+struct SessionSeriesCounts {
+  std::uint64_t samples = 0;                 // the link's samples in the store
+  std::uint64_t non_finite = 0;              // dropped: a NaN or infinite accelerometer or gyro value
+  std::uint64_t time_not_increasing = 0;     // dropped: device time not after the previous kept sample's
+  std::uint64_t outside_reference = 0;       // dropped: received before the first or after the last pose
+  std::uint64_t reference_rows = 0;          // poses in the store
+  std::uint64_t reference_rows_dropped = 0;  // non-finite, zero quaternion, or time not after the previous pose
+};
+
+struct SessionSeries {
+  estimator::ImuSeries series;  // t: seconds since the link's first sample, from device_time_us
+  std::int64_t link_id = 0;
+  SessionSeriesCounts counts;
+};
+
+// Reads `session` from `store`. The series' t is the IMU's device_time_us, in seconds from the link's first kept
+// sample. The reference's t_ns is on the session's monotonic clock, as the samples' recv_mono_ns are, so each sample
+// takes the reference interpolated at its recv_mono_ns: velocity linearly, attitude by slerp. Poses without a
+// velocity get one from the central difference of the positions. Throws std::invalid_argument for an unknown
+// session or link, a link without samples, or a reference asked for and missing (fewer than two usable poses).
+SessionSeries read_session_series(const store::Store& store, std::int64_t session,
+                                  const SessionSeriesOptions& options = {});
+
+}  // namespace imubridge::pipeline

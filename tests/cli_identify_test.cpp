@@ -1,0 +1,165 @@
+// `imubridge identify` and `imubridge evaluate` as a user runs them, on a session recorded by `imubridge sim`.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "estimator/params.hpp"
+#include "sim/scenario.hpp"
+#include "store/store.hpp"
+#include "tests/run_command.hpp"
+
+namespace imubridge::test {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+
+// One 60-s flight of the paper's scenario, recorded once for the whole suite (session 1), and a session without a
+// reference trajectory (session 2), written through the store as an importer without ground truth would.
+class IdentifyCommand : public ::testing::Test {
+ protected:
+  static inline fs::path dir_;
+  static inline std::string db_;
+
+  static void SetUpTestSuite() {
+    dir_ = fs::temp_directory_path() / ("imubridge_identify_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+    db_ = (dir_ / "flights.db").string();
+    const CommandResult r = run_imubridge("sim --scenario paper --seed 1 --db " + db_);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    store::Store store(db_);
+    const std::int64_t session = store.begin_session({.kind = "import"});
+    const std::int64_t link = store.add_link(session, "imu0", "imubridge", "test");
+    for (int k = 0; k < 400; ++k) {
+      protocol::Sample s;
+      s.link_id = static_cast<std::uint32_t>(link);
+      s.device_time_us = 5000 * k;
+      s.recv_mono_ns = 5'000'000 * static_cast<std::int64_t>(k);
+      s.accel = {0.0, 0.0, -9.8};
+      store.append_sample(session, s);
+    }
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+
+  static std::string out(const std::string& name) { return (dir_ / name).string(); }
+  static json read_json(const std::string& path) { return json::parse(slurp(path)); }
+  static CommandResult identify(const std::string& args) { return run_imubridge("identify --db " + db_ + " " + args); }
+
+  // A usage or data error: exit code `code` and one line on stderr that names the problem.
+  static void expect_error(const CommandResult& r, int code, const std::string& says) {
+    EXPECT_EQ(r.exit_code, code) << r.err;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(says), std::string::npos) << r.err;
+  }
+};
+
+TEST_F(IdentifyCommand, LmWritesThePapersParametersWithStandardErrors) {
+  const CommandResult r =
+      identify("--session 1 --model paper --method lm --velocity reference --out " + out("lm.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json p = read_json(out("lm.json"));
+  const json& x = p["paper"]["x"];
+  EXPECT_NEAR(x["r"].get<double>(), sim::kPaperR, 0.02 * sim::kPaperR);
+  EXPECT_NEAR(x["beta_deg"].get<double>(), 85.12, 1.0);
+  EXPECT_NEAR(x["alpha_deg"].get<double>(), -0.3, 0.1);
+  EXPECT_NEAR(x["mu"].get<double>(), sim::kPaperMu, 0.05 * sim::kPaperMu);
+  const json& id = p["identification"];
+  EXPECT_EQ(id["method"], "lm");
+  EXPECT_EQ(id["fit_windows"], json::parse("[[0.0, 33.0]]"));
+  EXPECT_EQ(id["validation_windows"][0][0], 33.0);
+  EXPECT_NEAR(id["validation_windows"][0][1].get<double>(), 60.0, 1e-9);
+  for (const char* key : {"paper.x.r", "paper.x.beta", "paper.x.alpha", "paper.x.mu", "paper.y.r"})
+    EXPECT_GT(id["std_errors"][key].get<double>(), 0.0) << key;
+  for (const char* key : {"paper.x.fit", "paper.x.validation", "paper.y.fit", "paper.y.validation"})
+    EXPECT_GT(id["rmse"][key].get<double>(), 0.0) << key;
+  // What `run` and `replay` will read: the same file through estimator/params.hpp, the live model filled in.
+  const auto params = p.get<estimator::ModelParams>();
+  EXPECT_GT(params.full.drag_quadratic.x(), 0.0);
+  EXPECT_NEAR(params.full.lever_arm.z(), -sim::kPaperR * std::sin(sim::kPaperBeta), 0.003);
+  // The summary for people: degrees, the correlation matrix, the wall time.
+  EXPECT_NE(r.err.find("beta"), std::string::npos);
+  EXPECT_NE(r.err.find("deg"), std::string::npos);
+  EXPECT_NE(r.err.find("correlation"), std::string::npos);
+  EXPECT_NE(r.err.find("wall time"), std::string::npos);
+}
+
+TEST_F(IdentifyCommand, GaWritesItsConvergenceCurveBesideTheParams) {
+  const CommandResult r = identify(
+      "--session 1 --method ga --seed 5 --population 30 --generations 60 --mutation 0.2 "
+      "--train 0:20 --validate 20:60 --out " +
+      out("ga.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json id = read_json(out("ga.json"))["identification"];
+  EXPECT_EQ(id["method"], "ga");
+  EXPECT_EQ(id["seed"], 5);
+  EXPECT_EQ(id["fit_windows"], json::parse("[[0.0, 20.0]]"));
+  std::istringstream curve(slurp(out("ga.convergence.csv")));
+  std::string line;
+  std::getline(curve, line);
+  EXPECT_EQ(line, "generation,paper.x,paper.y");
+  std::vector<double> best;
+  while (std::getline(curve, line)) best.push_back(std::stod(line.substr(line.find(',') + 1)));
+  ASSERT_EQ(best.size(), 61u);
+  for (std::size_t g = 1; g < best.size(); ++g) EXPECT_LE(best[g], best[g - 1]);
+  // The same seed again: the same file, byte for byte.
+  ASSERT_EQ(identify("--session 1 --method ga --seed 5 --population 30 --generations 60 --mutation 0.2 "
+                     "--train 0:20 --validate 20:60 --out " +
+                     out("ga2.json"))
+                .exit_code,
+            0);
+  EXPECT_EQ(slurp(out("ga.json")), slurp(out("ga2.json")));
+}
+
+TEST_F(IdentifyCommand, EvaluateScoresTheEstimatorAgainstTheReference) {
+  ASSERT_EQ(identify("--session 1 --velocity reference --out " + out("eval.json")).exit_code, 0);
+  const CommandResult r =
+      run_imubridge("evaluate --db " + db_ + " --session 1 --params " + out("eval.json") + " --window 10:60");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json e = json::parse(r.out);
+  EXPECT_EQ(e["samples"], 10000 - 2);  // the last two wait for the differentiator's window (delay (5 - 1) / 2)
+  const json& rmse = e["rmse_m_s"];
+  for (const char* source : {"estimator", "raw_inversion", "eq12", "zero"})
+    EXPECT_GT(rmse[source]["horizontal"].get<double>(), 0.0) << source;
+  EXPECT_LT(rmse["estimator"]["horizontal"], rmse["zero"]["horizontal"]);
+  EXPECT_LT(rmse["estimator"]["horizontal"], rmse["raw_inversion"]["horizontal"]);
+  EXPECT_LT(rmse["estimator"]["horizontal"], rmse["eq12"]["horizontal"]);
+}
+
+TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {
+  const std::string p = " --out " + out("bad.json");
+  expect_error(identify("--session 1 --train 40:20" + p), 2, "bad window");
+  expect_error(identify("--session 1 --train 100:200" + p), 2, "holds no data");
+  expect_error(identify("--session 1 --validate 70:" + p), 2, "validation window");
+  expect_error(identify("--session 9" + p), 2, "no session 9");
+  expect_error(identify("--session 1 --method sa" + p), 2, "ga, lm, ga+lm");
+  expect_error(identify("--session 1 --hold mounting" + p), 2, "--model full");
+  expect_error(identify("--session 1 --model full --hold wings" + p), 2, "unknown block");
+  expect_error(identify("--session 1 --model full --hold lever_arm --hold mounting --hold drag_linear "
+                        "--hold drag_quadratic --hold accel_bias" +
+                        p),
+               2, "nothing to identify");
+  expect_error(identify("--session 1 --method ga --population 1" + p), 2, "population");
+  expect_error(identify("--session 1 --train 0:0.01" + p), 2, "at least 4 samples");
+  expect_error(identify("--session 2 --velocity reference" + p), 2, "no reference trajectory");
+  expect_error(run_imubridge("identify --db " + out("missing.db") + " --session 1" + p), 1, "missing.db");
+  EXPECT_FALSE(fs::exists(out("bad.json")));
+
+  ASSERT_EQ(identify("--session 1 --out " + out("ok.json")).exit_code, 0);
+  expect_error(run_imubridge("evaluate --db " + db_ + " --session 2 --params " + out("ok.json")), 2,
+               "no reference trajectory");
+  std::ofstream(out("broken.json")) << "{\"paper\": {\"x\": {\"r\": -1}}}";
+  expect_error(run_imubridge("evaluate --db " + db_ + " --session 1 --params " + out("broken.json")), 2, "broken.json");
+  std::ofstream(out("nodrag.json")) << "{}";
+  expect_error(run_imubridge("evaluate --db " + db_ + " --session 1 --params " + out("nodrag.json")), 2, "drag");
+}
+
+}  // namespace
+}  // namespace imubridge::test
