@@ -1,0 +1,419 @@
+// `imubridge replay`, `import euroc` and `export` as a user runs them, on sessions made by `imubridge sim`.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "pipeline/estimation_stage.hpp"
+#include "sim/scenario.hpp"
+#include "store/store.hpp"
+#include "tests/run_command.hpp"
+
+namespace imubridge::test {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string last_line(const std::string& out) {
+  std::istringstream in(out);
+  std::string line, last;
+  while (std::getline(in, line)) last = line;
+  return last;
+}
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+bool same(double a, double b) { return a == b || (std::isnan(a) && std::isnan(b)); }
+
+class ReplayCommand : public ::testing::Test {
+ protected:
+  fs::path dir_ = fs::temp_directory_path() / ("imubridge_cli_replay_" + std::to_string(::getpid()));
+  fs::path db_ = dir_ / "flights.db";
+  void SetUp() override { fs::create_directories(dir_); }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Runs the program, expects success, and returns the id it prints alone on its last line.
+  std::int64_t run_for_id(const std::string& args) {
+    const auto r = run_imubridge(args);
+    EXPECT_EQ(r.exit_code, 0) << args << "\n" << r.err;
+    return std::stoll(last_line(r.out));
+  }
+  std::int64_t simulate(const std::string& protocol, double seconds) {
+    return run_for_id("sim --scenario paper --seed 5 --duration " + std::to_string(seconds) + " --protocol " +
+                      protocol + " --db " + db_.string());
+  }
+  std::string replay_args(std::int64_t session) const {
+    return "replay --db " + db_.string() + " --session " + std::to_string(session);
+  }
+
+  // The paper's parameters as PARAMS.json, so that the estimates carry velocities.
+  std::pair<fs::path, estimator::ModelParams> paper_params_file() const {
+    estimator::ModelParams p;
+    p.full.lever_arm = {sim::kPaperR * std::cos(sim::kPaperBeta), 0.0, -sim::kPaperR * std::sin(sim::kPaperBeta)};
+    p.full.mounting = {0.0, sim::kPaperAlpha, 0.0};
+    p.full.drag_quadratic = {sim::kPaperMu, sim::kPaperMu};
+    const fs::path path = dir_ / "PARAMS.json";
+    std::ofstream(path) << json(p).dump(2);
+    return {path, p};
+  }
+};
+
+// What the session's stored samples give through the EstimationStage, link by link: replay decodes the same
+// bytes again, so it must get exactly this.
+std::map<std::int64_t, std::vector<store::Estimate>> estimate_stored_samples(const store::Store& store,
+                                                                             std::int64_t session,
+                                                                             const estimator::ModelParams& params) {
+  pipeline::EstimationStage stage(params);
+  std::map<std::int64_t, std::vector<store::Estimate>> out;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) {
+    if (const auto e = stage.update(s)) out[e->link_id].push_back(*e);
+  });
+  return out;
+}
+
+std::map<std::int64_t, std::vector<store::Estimate>> stored_estimates(const store::Store& store, std::int64_t run) {
+  std::map<std::int64_t, std::vector<store::Estimate>> out;
+  store.for_each_estimate(run, [&](const store::Estimate& e) { out[e.link_id].push_back(e); });
+  return out;
+}
+
+void expect_same_estimates(const std::map<std::int64_t, std::vector<store::Estimate>>& a,
+                           const std::map<std::int64_t, std::vector<store::Estimate>>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (const auto& [link, list] : a) {
+    ASSERT_TRUE(b.contains(link));
+    ASSERT_EQ(list.size(), b.at(link).size());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const auto &x = list[i], &y = b.at(link)[i];
+      EXPECT_TRUE(x.seq == y.seq && same(x.t_s, y.t_s) && same(x.fx, y.fx) && same(x.fy, y.fy) && same(x.vx, y.vx) &&
+                  same(x.vy, y.vy) && same(x.var_vx, y.var_vx) && same(x.var_vy, y.var_vy))
+          << "link " << link << ", estimate " << i;
+    }
+  }
+}
+
+TEST_F(ReplayCommand, XbeeAndMavlinkSessionsReplayToWhatTheirStoredSamplesGive) {
+  const auto [params_path, params] = paper_params_file();
+  for (const std::string protocol : {"xbee", "mavlink"}) {
+    const std::int64_t session = simulate(protocol, 2.0);
+    const auto r = run_imubridge(replay_args(session) + " --params " + params_path.string());
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const std::int64_t run = std::stoll(last_line(r.out));
+    EXPECT_NE(r.err.find("400 samples"), std::string::npos) << r.err;  // 2 s at 200 Hz
+    const std::int64_t paced = run_for_id(replay_args(session) + " --params " + params_path.string() + " --speed 20");
+
+    const store::Store store(db_, {.read_only = true});
+    const auto want = estimate_stored_samples(store, session, params);
+    ASSERT_EQ(want.size(), 1u) << protocol;  // xbee: the radio's link, not the port's
+    EXPECT_TRUE(std::isfinite(want.begin()->second.front().vx));
+    expect_same_estimates(stored_estimates(store, run), want);
+    expect_same_estimates(stored_estimates(store, paced), want);
+    EXPECT_EQ(store.runs(session).front().info.kind, "replay");
+  }
+}
+
+TEST_F(ReplayCommand, FromToReplaysTheChunksReceivedInTheWindow) {
+  const std::int64_t session = simulate("imubridge", 2.0);  // one frame per chunk, received at the sample's time
+  const std::int64_t run = run_for_id(replay_args(session) + " --from 0.5 --to 1.5");
+  const store::Store store(db_, {.read_only = true});
+  std::vector<std::uint64_t> window;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) {
+    if (s.recv_mono_ns >= 500'000'000 && s.recv_mono_ns < 1'500'000'000) window.push_back(s.seq);
+  });
+  ASSERT_EQ(window.size(), 200u);
+  std::vector<std::uint64_t> estimated;
+  store.for_each_estimate(run, [&](const store::Estimate& e) { estimated.push_back(e.seq); });
+  // The estimator starts fresh at --from: two samples at each end of the window wait for neighbours in vain.
+  EXPECT_EQ(estimated, std::vector<std::uint64_t>(window.begin() + 2, window.end() - 2));
+
+  const auto backwards = run_imubridge(replay_args(session) + " --from 1.5 --to 0.5");
+  EXPECT_EQ(backwards.exit_code, 2);
+  EXPECT_EQ(count_lines(backwards.err), 1) << backwards.err;
+}
+
+TEST_F(ReplayCommand, ToPtyReemitsTheRecordedBytesOnAPseudoTerminal) {
+  const std::int64_t session = simulate("imubridge", 1.0);
+  std::vector<std::uint8_t> want;
+  {
+    const store::Store store(db_, {.read_only = true});
+    store.for_each_chunk(session, std::nullopt,
+                         [&](const store::Chunk& c) { want.insert(want.end(), c.bytes.begin(), c.bytes.end()); });
+  }
+  const fs::path link = dir_ / "ttyIMU";
+  CommandResult result;
+  std::thread replayer([&] { result = run_imubridge(replay_args(session) + " --to-pty " + link.string()); });
+
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!fs::is_symlink(link) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY);
+  std::vector<std::uint8_t> got;
+  if (fd >= 0) {
+    std::uint8_t buffer[4096];
+    pollfd pfd{fd, POLLIN, 0};
+    while (got.size() < want.size() && std::chrono::steady_clock::now() < deadline && ::poll(&pfd, 1, 100) >= 0) {
+      if (!(pfd.revents & POLLIN)) continue;
+      const ssize_t n = ::read(fd, buffer, sizeof buffer);
+      if (n <= 0) break;  // the replay closed the pty
+      got.insert(got.end(), buffer, buffer + n);
+    }
+    ::close(fd);
+  }
+  replayer.join();
+  ASSERT_GE(fd, 0) << "could not open " << link;
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(got.size(), want.size());
+  EXPECT_EQ(got, want);  // the tail too: the replay waits for its reader before closing the pty
+  EXPECT_FALSE(fs::exists(fs::symlink_status(link))) << "the symlink outlived the replay";
+}
+
+TEST_F(ReplayCommand, ImportsAMessyEurocFixtureReportingEverySkippedRow) {
+  const fs::path fixture = fs::path(IMUBRIDGE_SOURCE_DIR) / "tests/data/euroc_junk";
+  const auto r = run_imubridge("import euroc " + fixture.string() + " --reference " +
+                               (fixture / "reference_tum.txt").string() + " --db " + db_.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto err = r.err;
+  for (const char* expected :
+       {"skipped 9 rows of", "1 row: 3 fields, expected 7 (line 5)", "4 rows: not a finite number (lines 8-9, 16-17)",
+        "2 rows: empty field (lines 14-15)", "1 row: timestamp not after the previous row's (line 11)",
+        "warning: clipped values in 1 row of", "1 row: accel beyond +-65.534 m/s^2, clipped (line 12)",
+        "reference: 11 rows", "1 row: quaternion not of unit length (line 15)"}) {
+    EXPECT_NE(err.find(expected), std::string::npos) << "missing \"" << expected << "\" in:\n" << err;
+  }
+  const std::int64_t session = std::stoll(last_line(r.out));
+  // An imported session starts from bytes, so it replays like a recorded one: 7 samples, 3 estimates.
+  const auto replay = run_imubridge(replay_args(session));
+  ASSERT_EQ(replay.exit_code, 0) << replay.err;
+  EXPECT_NE(replay.err.find("7 samples, 3 estimates"), std::string::npos) << replay.err;
+}
+
+// `sim --euroc` writes EuRoC's conventions (z-up world, the sensor's pose); importing must undo them exactly.
+TEST_F(ReplayCommand, SimEurocDatasetImportsBackToTheSimulatorsTruth) {
+  const fs::path dataset = dir_ / "euroc";
+  ASSERT_EQ(run_imubridge("sim --scenario paper --seed 4 --duration 1 --euroc " + dataset.string()).exit_code, 0);
+  const std::int64_t session = run_for_id("import euroc " + dataset.string() + " --db " + db_.string());
+  const store::Store store(db_, {.read_only = true});
+  std::vector<store::ReferenceRow> reference;
+  store.for_each_reference(session, [&](const store::ReferenceRow& r) { reference.push_back(r); });
+  std::vector<protocol::Sample> samples;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { samples.push_back(s); });
+
+  const auto config = sim::make_scenario("paper", 4, 1.0);
+  const auto truth = sim::simulate(config);
+  ASSERT_EQ(reference.size(), truth.size());
+  ASSERT_EQ(samples.size(), truth.size());
+  const Eigen::Vector3d& r = config.imu.pose.position_m;
+  const Eigen::Matrix3d body_from_sensor = config.imu.pose.sensor_from_body.transpose();
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    const auto& s = truth[i].truth;
+    const Eigen::Matrix3d ned_from_body = s.attitude.toRotationMatrix();
+    // The IMU's point: the mass centre's position plus the lever arm, its velocity plus omega x r.
+    const Eigen::Vector3d p = s.position_ned + ned_from_body * r;
+    const Eigen::Vector3d v = s.velocity_ned + ned_from_body * s.omega.cross(r);
+    const auto& row = reference[i];
+    EXPECT_EQ(row.t_ns, samples[i].recv_mono_ns);  // one clock for samples and reference
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(row.position[a], p[a], 1e-12) << i;
+      ASSERT_TRUE(row.velocity.has_value());  // from the file: EuRoC's ground truth has velocities
+      EXPECT_NEAR((*row.velocity)[a], v[a], 1e-12) << i;
+      EXPECT_NEAR(samples[i].accel[a], truth[i].measured.accel[a], 1e-3 + 1e-12) << i;  // half the import's count
+    }
+    const Eigen::Quaterniond q(row.quat_wxyz[0], row.quat_wxyz[1], row.quat_wxyz[2], row.quat_wxyz[3]);
+    EXPECT_TRUE(q.toRotationMatrix().isApprox(ned_from_body * body_from_sensor, 1e-12)) << i;  // sensor -> NED
+  }
+}
+
+// A store written here, with values chosen to test the text: NaN, -0, tiny and long numbers, absent groups, and
+// an event detail that needs CSV quoting.
+class ExportCommand : public ReplayCommand {
+ protected:
+  std::int64_t session_ = 0, run_ = 0;
+  protocol::Sample with_mag_, without_mag_;
+  std::vector<store::Estimate> estimates_;
+  std::vector<store::ReferenceRow> reference_;
+
+  void SetUp() override {
+    ReplayCommand::SetUp();
+    store::Store store(db_);
+    session_ = store.begin_session({.kind = "sim", .source = "test", .config = "{}", .started_wall_ns = 1});
+    const auto link = store.add_link(session_, "imu0", "imubridge", "test");
+    with_mag_ = {.link_id = static_cast<std::uint32_t>(link),
+                 .seq = 18446744073709551615u,
+                 .device_time_us = 5000,
+                 .recv_mono_ns = 123456789012,
+                 .accel = {0.1, -0.0, 1e-300},
+                 .gyro = {1.0 / 3, 2, -9.80665},
+                 .mag = {21.5, -4, 43},
+                 .temperature_c = 31.25,
+                 .has_mag = true,
+                 .has_temperature = true};
+    without_mag_ = {.link_id = static_cast<std::uint32_t>(link),
+                    .seq = 1,
+                    .device_time_us = 10000,
+                    .recv_mono_ns = 2,
+                    .accel = {1, 2, 3},
+                    .gyro = {4, 5, 6}};
+    store.append_sample(session_, with_mag_);
+    store.append_sample(session_, without_mag_);
+    run_ = store.begin_run(session_, {.kind = "live", .params_json = "{}"});
+    estimates_ = {{.link_id = link,
+                   .seq = 7,
+                   .t_s = 0.035,
+                   .fx = -0.0,
+                   .fy = 0.1 + 0.2,
+                   .vx = std::nan(""),
+                   .vy = std::nan(""),
+                   .var_vx = std::nan(""),
+                   .var_vy = 1e300}};
+    store.append_estimate(run_, estimates_[0]);
+    reference_ = {{.t_ns = 10, .position = {1, 2, 3}, .quat_wxyz = {1, 0, 0, 0}, .velocity = std::array{0.5, 0., 0.}},
+                  {.t_ns = 20, .position = {1.5, 2, 3}, .quat_wxyz = {0, 1, 0, 0}}};
+    for (const auto& row : reference_) store.append_reference(session_, row);
+    store.append_event(session_, {.link_id = link,
+                                  .mono_ns = 10,
+                                  .wall_ns = 20,
+                                  .kind = "note",
+                                  .count = 1,
+                                  .detail = "a, \"quoted\" word\nsecond line"});
+    store.append_event(session_, {.mono_ns = 30, .wall_ns = 40, .kind = "reconnect", .count = 2, .detail = "plain"});
+  }
+
+  std::string exported(const std::string& what, const std::string& format) {
+    const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) + " --what " +
+                                 what + " --format " + format);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.out;
+  }
+};
+
+// Split one CSV line without quoted fields.
+std::vector<std::string> csv_fields(const std::string& line) {
+  std::vector<std::string> fields;
+  std::size_t start = 0;
+  for (std::size_t comma; (comma = line.find(',', start)) != std::string::npos; start = comma + 1) {
+    fields.push_back(line.substr(start, comma - start));
+  }
+  fields.push_back(line.substr(start));
+  return fields;
+}
+
+TEST_F(ExportCommand, CsvSamplesHaveAHeaderAndReadBackToTheSameDoubles) {
+  const auto lines = lines_of(exported("samples", "csv"));
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[0], "link_id,seq,device_time_us,recv_mono_ns,ax,ay,az,gx,gy,gz,mx,my,mz,temperature_c");
+  const auto a = csv_fields(lines[1]);
+  ASSERT_EQ(a.size(), 14u);
+  EXPECT_EQ(a[1], "18446744073709551615");  // unsigned, as the device numbered it
+  EXPECT_EQ(a[3], "123456789012");
+  const std::vector<double> want{0.1, -0.0, 1e-300, 1.0 / 3, 2, -9.80665, 21.5, -4, 43, 31.25};
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    EXPECT_EQ(std::strtod(a[4 + i].c_str(), nullptr), want[i]) << a[4 + i];
+  }
+  EXPECT_TRUE(std::signbit(std::strtod(a[5].c_str(), nullptr)));  // -0 stays -0
+  const auto b = csv_fields(lines[2]);
+  ASSERT_EQ(b.size(), 14u);
+  for (std::size_t i = 10; i < 14; ++i) EXPECT_EQ(b[i], "") << i;  // no magnetometer, no temperature
+}
+
+TEST_F(ExportCommand, JsonlEstimatesWriteNanAsNull) {
+  const auto lines = lines_of(exported("estimates", "jsonl"));
+  ASSERT_EQ(lines.size(), 1u);
+  const json j = json::parse(lines[0]);
+  EXPECT_EQ(j["seq"], 7);
+  EXPECT_EQ(j["t_s"].get<double>(), 0.035);
+  EXPECT_EQ(j["fy"].get<double>(), 0.1 + 0.2);
+  EXPECT_TRUE(std::signbit(j["fx"].get<double>()));
+  EXPECT_TRUE(j["vx"].is_null() && j["vy"].is_null() && j["var_vx"].is_null());
+  EXPECT_EQ(j["var_vy"].get<double>(), 1e300);
+
+  const auto csv = lines_of(exported("estimates", "csv"));
+  ASSERT_EQ(csv.size(), 2u);
+  const auto fields = csv_fields(csv[1]);
+  EXPECT_EQ(fields[5], "");  // NaN
+  EXPECT_EQ(fields[6], "");
+}
+
+TEST_F(ExportCommand, ReferenceWithoutVelocityIsEmptyOrNull) {
+  const auto csv = lines_of(exported("reference", "csv"));
+  ASSERT_EQ(csv.size(), 3u);
+  EXPECT_EQ(csv[0], "t_ns,px,py,pz,qw,qx,qy,qz,vx,vy,vz");
+  EXPECT_EQ(csv_fields(csv[1])[8], "0.5");
+  EXPECT_EQ(csv_fields(csv[2])[8], "");
+  const auto jsonl = lines_of(exported("reference", "jsonl"));
+  ASSERT_EQ(jsonl.size(), 2u);
+  EXPECT_EQ(json::parse(jsonl[0])["vx"].get<double>(), 0.5);
+  EXPECT_TRUE(json::parse(jsonl[1])["vx"].is_null());
+  EXPECT_EQ(json::parse(jsonl[1])["px"].get<double>(), 1.5);
+}
+
+TEST_F(ExportCommand, EventsQuoteTextAsRfc4180SaysAndKeepSessionEventsApart) {
+  const std::string link = std::to_string(with_mag_.link_id);
+  EXPECT_EQ(exported("events", "csv"), "link_id,mono_ns,wall_ns,kind,count,detail\n" + link +
+                                           ",10,20,note,1,\"a, \"\"quoted\"\" word\nsecond line\"\n"
+                                           ",30,40,reconnect,2,plain\n");
+  const auto jsonl = lines_of(exported("events", "jsonl"));
+  ASSERT_EQ(jsonl.size(), 2u);
+  EXPECT_EQ(json::parse(jsonl[0])["detail"], "a, \"quoted\" word\nsecond line");
+  EXPECT_TRUE(json::parse(jsonl[1])["link_id"].is_null());
+}
+
+TEST_F(ExportCommand, OutWritesAFileInsteadOfStdout) {
+  const fs::path out = dir_ / "samples.jsonl";
+  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) +
+                               " --what samples --format jsonl --out " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, "");
+  EXPECT_EQ(lines_of(slurp(out)).size(), 2u);
+}
+
+TEST_F(ExportCommand, MistakesGetOneLineErrors) {
+  const std::string db = " --db " + db_.string();
+  const std::string session = " --session " + std::to_string(session_);
+  const fs::path missing = dir_ / "missing.db";
+  struct Case {
+    std::string args, message;
+  };
+  {
+    store::Store store(db_);
+    store.begin_run(session_, {.kind = "replay"});  // now the session has two runs
+  }
+  for (const Case& c : std::vector<Case>{
+           {"export --db " + missing.string() + session + " --what samples", "missing.db: no such file"},
+           {"replay --db " + missing.string() + session, "missing.db: no such file"},
+           {"export" + db + " --session 99 --what samples", "no session 99 in the store"},
+           {"replay" + db + " --session 99", "no session 99 in the store"},
+           {"export" + db + session + " --what estimates --run 42", "has no run 42"},
+           {"export" + db + session + " --what estimates", "choose one with --run"},
+           {"export" + db + session + " --what samples --run " + std::to_string(run_), "--run selects estimates"},
+           {"replay" + db + session + " --speed fast", "--speed"},
+           {"import euroc " + (dir_ / "nowhere").string() + db, "no such file"},
+       }) {
+    const auto r = run_imubridge(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.err;
+    EXPECT_EQ(count_lines(r.err), 1) << c.args << "\n" << r.err;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.args << "\n" << r.err;
+    EXPECT_EQ(r.out, "") << c.args;
+  }
+  EXPECT_FALSE(fs::exists(missing)) << "a reader created the store it could not find";
+}
+
+}  // namespace
+}  // namespace imubridge::test
