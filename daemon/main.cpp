@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <exception>
 #include <map>
+#include <stdexcept>
 #include <string>
 
 #include "daemon/command.hpp"
@@ -38,6 +39,9 @@ int main(int argc, char** argv) {
   for (auto* sub : app.get_subcommands()) {
     try {
       return runners.at(sub)();
+    } catch (const std::invalid_argument& e) {  // bad input the user can fix: a value, a config key, a name
+      std::fprintf(stderr, "imubridge %s: error: %s\n", sub->get_name().c_str(), e.what());
+      return 2;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "imubridge %s: error: %s\n", sub->get_name().c_str(), e.what());
       return 1;

@@ -1,0 +1,81 @@
+// `imubridge evaluate`: run the drag-velocity estimator over a session with a reference trajectory and print, as
+// JSON, how far its velocity is from the truth, beside the raw drag inversion, eq. (12)'s open-loop integration and
+// "not moving" (docs/identification.md).
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "daemon/command.hpp"
+#include "daemon/daemon.hpp"
+#include "estimator/identify.hpp"
+#include "pipeline/session_series.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::cli {
+namespace {
+
+namespace est = imubridge::estimator;
+using nlohmann::json;
+
+struct EvaluateCliOptions {
+  std::string db, params;
+  std::int64_t session = 0;
+  std::optional<std::int64_t> link;
+  std::optional<std::string> window;
+};
+
+json to_json(const est::VelocityError& e) {
+  return {{"x", e.axis.x()}, {"y", e.axis.y()}, {"horizontal", e.horizontal}};
+}
+
+int run(const EvaluateCliOptions& o) {
+  const est::ModelParams params = daemon::load_params(o.params);
+  const std::optional<est::TimeWindow> window = o.window ? std::optional(est::parse_window(*o.window)) : std::nullopt;
+  const store::Store store(o.db, {.read_only = true});
+  const pipeline::SessionSeries session =
+      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = true});
+  const est::VelocityEvaluation e = est::evaluate_velocity(session.series, params.full, window);
+  const est::DragVelocityCounters& c = e.counters;
+  const json out = {{"session", o.session},
+                    {"link", session.link_id},
+                    {"window", {e.window.start, e.window.end}},
+                    {"samples", e.samples},
+                    {"rmse_m_s",
+                     {{"estimator", to_json(e.estimator)},
+                      {"raw_inversion", to_json(e.inversion)},
+                      {"eq12", to_json(e.eq12)},
+                      {"zero", to_json(e.zero)}}},
+                    {"estimator_counters",
+                     {{"samples_in", c.samples_in},
+                      {"estimates_out", c.estimates_out},
+                      {"rejected_non_finite", c.rejected_non_finite},
+                      {"rejected_out_of_range", c.rejected_out_of_range},
+                      {"rejected_time", c.rejected_time},
+                      {"gaps", c.gaps}}},
+                    {"series_counts",
+                     {{"samples", session.counts.samples},
+                      {"non_finite", session.counts.non_finite},
+                      {"time_not_increasing", session.counts.time_not_increasing},
+                      {"outside_reference", session.counts.outside_reference}}}};
+  std::printf("%s\n", out.dump(2).c_str());
+  return 0;
+}
+
+const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
+  auto o = std::make_shared<EvaluateCliOptions>();
+  auto* cmd = app.add_subcommand(
+      "evaluate", "Score the drag-velocity estimator against a session's reference trajectory (JSON on stdout)");
+  cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
+  cmd->add_option("--session", o->session, "Session id (it needs a reference trajectory)")->required();
+  cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
+  cmd->add_option("--params", o->params, "PARAMS.json, e.g. from `imubridge identify`")->required();
+  cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start (default: all)");
+  return [o] { return run(*o); };
+});
+
+}  // namespace
+}  // namespace imubridge::cli

@@ -1,0 +1,206 @@
+// `imubridge identify`: fit the accelerometer model to a recorded session and write PARAMS.json
+// (docs/identification.md). A short summary for people goes to stderr.
+#include "estimator/identify.hpp"
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "daemon/command.hpp"
+#include "estimator/constants.hpp"
+#include "pipeline/session_series.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::cli {
+namespace {
+
+namespace est = imubridge::estimator;
+namespace fs = std::filesystem;
+
+struct IdentifyCliOptions {
+  std::string db, out;
+  std::int64_t session = 0;
+  std::optional<std::int64_t> link;
+  std::string model = "paper", method = "lm", velocity = "eq12";
+  std::optional<std::string> train, validate;
+  std::vector<std::string> hold;
+  est::GaOptions ga;
+};
+
+// How a parameter is shown to people: degrees for angles, its SI unit otherwise.
+struct Shown {
+  double scale;
+  const char* unit;
+};
+Shown shown(const std::string& name) {
+  if (name == "beta" || name == "alpha" || name.starts_with("mounting")) return {180.0 / est::kPi, "deg"};
+  if (name == "r" || name.starts_with("lever_arm")) return {1.0, "m"};
+  if (name == "mu" || name.starts_with("drag_quadratic")) return {1.0, "1/m"};
+  if (name.starts_with("drag_linear")) return {1.0, "1/s"};
+  return {1.0, "m/s^2"};  // accel_bias
+}
+
+// The lower triangle, then a warning for every pair the data cannot tell apart.
+void print_correlation(const est::Uncertainty& u) {
+  constexpr double kIndistinct = 0.99;
+  const auto at = [&u](std::size_t i, std::size_t j) {
+    return u.correlation(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j));
+  };
+  std::fprintf(stderr, "  correlation:\n");
+  for (std::size_t i = 0; i < u.names.size(); ++i) {
+    std::fprintf(stderr, "    %-16s", u.names[i].c_str());
+    for (std::size_t j = 0; j <= i; ++j) std::fprintf(stderr, " %6.3f", at(i, j));
+    std::fprintf(stderr, "\n");
+  }
+  for (std::size_t i = 0; i < u.names.size(); ++i) {
+    for (std::size_t j = 0; j < i; ++j) {
+      if (std::abs(at(i, j)) > kIndistinct)
+        std::fprintf(stderr, "  warning: %s and %s are correlated %.3f: these data cannot tell them apart\n",
+                     u.names[j].c_str(), u.names[i].c_str(), at(i, j));
+    }
+  }
+}
+
+void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& result, std::int64_t link,
+                   double wall_seconds) {
+  const est::Identification& id = result.params.identification;
+  std::fprintf(stderr, "identified the %s model by %s from session %lld (link %lld), velocity %s\n", o.model.c_str(),
+               id.method.c_str(), static_cast<long long>(o.session), static_cast<long long>(link), o.velocity.c_str());
+  for (const est::FitReport& fit : result.fits) {
+    std::fprintf(stderr, "%s: train %.3f:%.3f s (%zu samples), validate %.3f:%.3f s (%zu samples)\n", fit.name.c_str(),
+                 id.fit_windows[0].start, id.fit_windows[0].end, fit.fit_samples, id.validation_windows[0].start,
+                 id.validation_windows[0].end, fit.validation_samples);
+    const est::Uncertainty& u = fit.uncertainty;
+    for (std::size_t i = 0; i < u.names.size(); ++i) {
+      const Shown s = shown(u.names[i]);
+      const double value = u.value[static_cast<Eigen::Index>(i)] * s.scale;
+      if (u.failure.empty())
+        std::fprintf(stderr, "  %-16s %12.6g ± %-10.3g %s\n", u.names[i].c_str(), value,
+                     u.std_error[static_cast<Eigen::Index>(i)] * s.scale, s.unit);
+      else
+        std::fprintf(stderr, "  %-16s %12.6g %s\n", u.names[i].c_str(), value, s.unit);
+    }
+    if (!u.failure.empty()) std::fprintf(stderr, "  no standard errors: %s\n", u.failure.c_str());
+    const auto rmse = [&](const std::string& key) { return id.rmse.at(key); };
+    if (fit.name == "full") {
+      std::fprintf(stderr, "  RMSE x/y: fit %.4f/%.4f, validation %.4f/%.4f m/s^2\n", rmse("full.x.fit"),
+                   rmse("full.y.fit"), rmse("full.x.validation"), rmse("full.y.validation"));
+    } else {
+      std::fprintf(stderr, "  RMSE fit %.4f, validation %.4f m/s^2\n", rmse(fit.name + ".fit"),
+                   rmse(fit.name + ".validation"));
+    }
+    std::fprintf(stderr, "  OF %.4f m/s^2 on the training window; solved in %.3f s", fit.fit_objective,
+                 fit.solve_seconds);
+    if (fit.lm) {
+      std::fprintf(stderr, " (LM: %d iterations, %s)", fit.lm->iterations,
+                   fit.lm->converged ? "converged" : fit.lm->message.c_str());
+    }
+    std::fprintf(stderr, "\n");
+    if (fit.lm && u.failure.empty()) print_correlation(u);
+  }
+  std::fprintf(stderr, "wall time %.3f s; wrote %s\n", wall_seconds, o.out.c_str());
+}
+
+void write_text(const fs::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::trunc);
+  out << text;
+  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
+}
+
+// The GA's convergence curves (the paper's Fig. 12): one row per generation, one column per fitted group.
+void write_convergence(const fs::path& path, const std::vector<est::FitReport>& fits) {
+  std::string csv = "generation";
+  for (const est::FitReport& fit : fits) csv += "," + fit.name;
+  csv += "\n";
+  for (std::size_t g = 0; g < fits.front().convergence.size(); ++g) {
+    csv += std::to_string(g);
+    for (const est::FitReport& fit : fits) {
+      char cell[32];
+      std::snprintf(cell, sizeof cell, ",%.9g", fit.convergence[g]);
+      csv += cell;
+    }
+    csv += "\n";
+  }
+  write_text(path, csv);
+}
+
+est::FullHold parse_hold(const std::vector<std::string>& names) {
+  const auto& blocks = est::kFullBlockNames;
+  est::FullHold hold;
+  for (const std::string& name : names) {
+    const auto it = std::find(blocks.begin(), blocks.end(), name);
+    if (it == blocks.end())
+      throw std::invalid_argument(
+          "unknown block \"" + name +
+          "\" for --hold (valid: lever_arm, mounting, drag_linear, drag_quadratic, accel_bias)");
+    hold.blocks[static_cast<std::size_t>(it - blocks.begin())] = true;
+  }
+  return hold;
+}
+
+int run(const IdentifyCliOptions& o) {
+  const auto start = std::chrono::steady_clock::now();
+  est::IdentifyOptions options;
+  options.model = est::parse_model(o.model);
+  options.method = est::parse_method(o.method);
+  options.velocity = est::parse_velocity(o.velocity);
+  if (o.train) options.train = est::parse_window(*o.train);
+  if (o.validate) options.validate = est::parse_window(*o.validate);
+  options.ga = o.ga;
+  options.hold = parse_hold(o.hold);
+  if (!o.hold.empty() && options.model != est::ModelKind::kFull)
+    throw std::invalid_argument("--hold applies to --model full only");
+
+  const store::Store store(o.db, {.read_only = true});
+  const pipeline::SessionSeries session = pipeline::read_session_series(
+      store, o.session, {.link = o.link, .reference = options.velocity == est::VelocitySource::kReference});
+  const est::IdentifyResult result = est::identify(session.series, options);
+
+  write_text(o.out, nlohmann::json(result.params).dump(2) + "\n");
+  if (!result.fits.front().convergence.empty()) {
+    const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
+    write_convergence(curve, result.fits);
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  print_summary(o, result, session.link_id, wall);
+  return 0;
+}
+
+const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
+  auto o = std::make_shared<IdentifyCliOptions>();
+  auto* cmd = app.add_subcommand("identify", "Fit the accelerometer model to a recorded session; write PARAMS.json");
+  cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
+  cmd->add_option("--session", o->session, "Session id")->required();
+  cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
+  cmd->add_option("--model", o->model, "paper (eq. 14, pitch and roll axes) | full (the 3-D model)")
+      ->capture_default_str();
+  cmd->add_option("--method", o->method, "ga (the paper's) | lm (Levenberg-Marquardt) | ga+lm")->capture_default_str();
+  cmd->add_option("--train", o->train, "Fit window T0:T1 in seconds from the session start (default 0:33)");
+  cmd->add_option("--validate", o->validate, "Validation window T0:T1 (default: from the end of --train on)");
+  cmd->add_option("--velocity", o->velocity, "Velocity in the drag term: eq12 (from the gyro) | reference")
+      ->capture_default_str();
+  cmd->add_option("--hold", o->hold,
+                  "Full model: keep a block at its default, repeatable "
+                  "(lever_arm, mounting, drag_linear, drag_quadratic, accel_bias)");
+  cmd->add_option("--seed", o->ga.seed, "GA: random seed (same seed, same result)")->capture_default_str();
+  cmd->add_option("--population", o->ga.population, "GA: individuals per generation")->capture_default_str();
+  cmd->add_option("--generations", o->ga.generations, "GA: generations")->capture_default_str();
+  cmd->add_option("--mutation", o->ga.mutation, "GA: probability of mutating each gene of a child")
+      ->capture_default_str();
+  cmd->add_option("--out", o->out, "Where to write PARAMS.json (the GA's curve goes beside it, .convergence.csv)")
+      ->required();
+  return [o] { return run(*o); };
+});
+
+}  // namespace
+}  // namespace imubridge::cli

@@ -1,0 +1,233 @@
+// `imubridge sim`: fly a simulated quadrotor and deliver its IMU stream — recorded as a session, written as an
+// EuRoC/ASL dataset or a capture file, or streamed live on a pseudo-terminal.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/command.hpp"
+#include "daemon/pty.hpp"
+#include "pipeline/link_recorder.hpp"
+#include "pipeline/session_config.hpp"
+#include "protocol/calibration.hpp"
+#include "sim/frame_encoder.hpp"
+#include "sim/scenario.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct SimOptions {
+  std::string scenario = "paper";
+  std::uint64_t seed = 1;
+  std::optional<double> duration_s;
+  std::optional<double> rate_hz;
+  std::vector<std::string> effects;
+  std::string protocol = "imubridge";
+  double speed = 1.0;
+  std::string db, euroc, pty, file;
+};
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void on_stop_signal(int) { g_stop = 1; }
+
+std::int64_t wall_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+std::int64_t to_ns(double seconds) { return std::llround(seconds * 1e9); }
+
+sim::SimConfig make_config(const SimOptions& o) {
+  sim::SimConfig config = sim::make_scenario(o.scenario, o.seed, o.duration_s, o.effects);
+  if (o.rate_hz) config.imu.rate_hz = *o.rate_hz;
+  return config;
+}
+
+nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
+  return {{"scenario", o.scenario},      {"seed", o.seed},         {"duration_s", config.duration_s},
+          {"rate_hz", config.imu.rate_hz}, {"effects", o.effects}, {"protocol", o.protocol}};
+}
+
+// The flight as a session: the bytes a ground station would have received, decoded by the same recorder the
+// daemon uses, with the simulator's truth as the session's reference trajectory.
+int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
+  const auto format = protocol::parse_wire_format(o.protocol);
+  store::Store store(o.db);
+  const std::int64_t start_wall = wall_now_ns();
+  nlohmann::json description = describe(o, config);
+  pipeline::add_recorded_links(description, {{"sim", format, config.imu.calibration}});
+  const std::int64_t session = store.begin_session(
+      {.kind = "sim", .source = "imubridge sim " + describe(o, config).dump(), .config = description.dump(),
+       .started_wall_ns = start_wall});
+  const std::int64_t link = store.add_link(session, "sim", o.protocol, "simulated IMU, scenario " + o.scenario);
+  pipeline::LinkRecorder recorder(store, session, link, "sim", format, config.imu.calibration);
+  sim::FrameEncoder encoder(format);
+  std::vector<std::uint8_t> bytes;
+  std::vector<protocol::Sample> samples;
+  std::int64_t last_ns = 0;
+  sim::simulate(config, [&](const sim::SimSample& s) {
+    last_ns = to_ns(s.time_s);
+    bytes.clear();
+    samples.clear();
+    encoder.encode(s, bytes);
+    if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
+    const auto& q = s.truth.attitude;
+    store.append_reference(session, {.t_ns = last_ns,
+                                     .position = {s.truth.position_ned.x(), s.truth.position_ned.y(),
+                                                  s.truth.position_ned.z()},
+                                     .quat_wxyz = {q.w(), q.x(), q.y(), q.z()},
+                                     .velocity = std::array{s.truth.velocity_ned.x(), s.truth.velocity_ned.y(),
+                                                            s.truth.velocity_ned.z()}});
+    store.commit_if_due(Clock::now());
+  });
+  bytes.clear();
+  samples.clear();
+  encoder.flush(bytes);
+  if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
+  recorder.finish(last_ns, start_wall + last_ns, samples);
+  store.end_session(session, wall_now_ns());
+  store.commit();
+  std::fprintf(stderr, "recorded %s flight (%.1f s, seed %llu) into %s as session %lld\n", o.scenario.c_str(),
+               config.duration_s, static_cast<unsigned long long>(o.seed), o.db.c_str(),
+               static_cast<long long>(session));
+  std::printf("%lld\n", static_cast<long long>(session));
+  return 0;
+}
+
+// EuRoC/ASL layout. EuRoC's world frame has z up and its poses are the sensor's: so positions and velocities are
+// the IMU's (not the mass centre's), rotated from NED by 180 degrees about x, and q_RS takes sensor axes to world.
+int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
+  const fs::path root = fs::path(o.euroc) / "mav0";
+  fs::create_directories(root / "imu0");
+  fs::create_directories(root / "state_groundtruth_estimate0");
+  std::ofstream imu(root / "imu0" / "data.csv");
+  std::ofstream truth(root / "state_groundtruth_estimate0" / "data.csv");
+  if (!imu || !truth) throw std::runtime_error("cannot write into " + o.euroc);
+  imu << "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+         "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n";
+  truth << "#timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z [],"
+           "v_RS_R_x [m s^-1],v_RS_R_y [m s^-1],v_RS_R_z [m s^-1],b_w_RS_S_x [rad s^-1],b_w_RS_S_y [rad s^-1],"
+           "b_w_RS_S_z [rad s^-1],b_a_RS_S_x [m s^-2],b_a_RS_S_y [m s^-2],b_a_RS_S_z [m s^-2]\n";
+  imu.precision(17);
+  truth.precision(17);
+  const Eigen::Matrix3d zup_from_ned = Eigen::Vector3d(1, -1, -1).asDiagonal();
+  const Eigen::Matrix3d body_from_sensor = config.imu.pose.sensor_from_body.transpose();
+  const Eigen::Vector3d& r = config.imu.pose.position_m;
+  const auto& errors = config.imu.errors;
+  const std::int64_t t0 = 1'000'000'000'000'000'000;  // an EuRoC-like epoch stamp, fixed so files are reproducible
+  std::uint64_t n = 0;
+  sim::simulate(config, [&](const sim::SimSample& s) {
+    const std::int64_t t = t0 + to_ns(s.time_s);
+    const auto& m = s.measured;
+    imu << t << ',' << m.gyro.x() << ',' << m.gyro.y() << ',' << m.gyro.z() << ',' << m.accel.x() << ','
+        << m.accel.y() << ',' << m.accel.z() << '\n';
+    const Eigen::Matrix3d ned_from_body = s.truth.attitude.toRotationMatrix();
+    const Eigen::Vector3d p = zup_from_ned * (s.truth.position_ned + ned_from_body * r);
+    const Eigen::Vector3d v = zup_from_ned * (s.truth.velocity_ned + ned_from_body * s.truth.omega.cross(r));
+    const Eigen::Quaterniond q(zup_from_ned * ned_from_body * body_from_sensor);
+    truth << t << ',' << p.x() << ',' << p.y() << ',' << p.z() << ',' << q.w() << ',' << q.x() << ',' << q.y()
+          << ',' << q.z() << ',' << v.x() << ',' << v.y() << ',' << v.z() << ',' << errors.gyro_bias.x() << ','
+          << errors.gyro_bias.y() << ',' << errors.gyro_bias.z() << ',' << errors.accel_bias.x() << ','
+          << errors.accel_bias.y() << ',' << errors.accel_bias.z() << '\n';
+    ++n;
+  });
+  if (!imu.flush() || !truth.flush()) throw std::runtime_error("write error in " + o.euroc);
+  std::fprintf(stderr, "wrote %llu samples in EuRoC/ASL layout under %s\n", static_cast<unsigned long long>(n),
+               o.euroc.c_str());
+  return 0;
+}
+
+// The wire bytes, either into a file as fast as possible, or onto a pseudo-terminal at the flight's own pace.
+int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
+  const auto format = protocol::parse_wire_format(o.protocol);
+  sim::FrameEncoder encoder(format);
+  std::vector<std::uint8_t> bytes;
+  std::unique_ptr<PtyPair> pty;
+  std::ofstream file;
+  if (!o.pty.empty()) {
+    pty = std::make_unique<PtyPair>(o.pty);
+    std::fprintf(stderr, "streaming %s frames on %s (%s) at %gx real time; Ctrl-C stops\n", o.protocol.c_str(),
+                 o.pty.c_str(), pty->slave_name().c_str(), o.speed);
+    std::signal(SIGINT, on_stop_signal);
+    std::signal(SIGTERM, on_stop_signal);
+  } else {
+    file.open(o.file, std::ios::binary | std::ios::trunc);
+    if (!file) throw std::runtime_error("cannot write " + o.file);
+  }
+  const auto start = Clock::now();
+  std::uint64_t written = 0;
+  auto deliver = [&](double t) {
+    if (bytes.empty()) return;
+    if (pty) {
+      std::this_thread::sleep_until(start + std::chrono::nanoseconds(to_ns(t / o.speed)));
+      pty->write(bytes);
+    } else {
+      file.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    }
+    written += bytes.size();
+    bytes.clear();
+  };
+  sim::Simulator simulator(config);
+  double t = 0;
+  while (!g_stop) {
+    auto s = simulator.next();
+    if (!s) break;
+    t = s->time_s;
+    encoder.encode(*s, bytes);
+    deliver(t);
+  }
+  encoder.flush(bytes);
+  deliver(t);
+  if (file.is_open() && !file.flush()) throw std::runtime_error("write error on " + o.file);
+  std::fprintf(stderr, "sent %llu bytes (%.1f s of flight)", static_cast<unsigned long long>(written), t);
+  if (pty && pty->dropped_bytes() > 0) {
+    std::fprintf(stderr, "; %llu bytes dropped because nobody was reading",
+                 static_cast<unsigned long long>(pty->dropped_bytes()));
+  }
+  std::fprintf(stderr, "\n");
+  return 0;
+}
+
+const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
+  auto o = std::make_shared<SimOptions>();
+  auto* cmd = app.add_subcommand("sim", "Fly a simulated quadrotor and record, write or stream its IMU data");
+  cmd->add_option("--scenario", o->scenario, "paper | center | hover (docs/simulator.md)")->capture_default_str();
+  cmd->add_option("--seed", o->seed, "Random seed: same seed, same bytes")->capture_default_str();
+  cmd->add_option("--duration", o->duration_s, "Flight length in seconds (default: the scenario's)");
+  cmd->add_option("--rate", o->rate_hz, "IMU sample rate in Hz (default: the scenario's)");
+  cmd->add_option("--effect", o->effects, "Extra effect NAME=VALUE, repeatable (docs/simulator.md lists them)");
+  cmd->add_option("--protocol", o->protocol, "Wire format for --db, --pty and --file")
+      ->check(CLI::IsMember({"imubridge", "xbee", "xbee-escaped", "mavlink"}))
+      ->capture_default_str();
+  cmd->add_option("--speed", o->speed, "Pace for --pty, as a multiple of real time")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  auto* out = cmd->add_option_group("output", "Where the flight goes (exactly one)");
+  out->add_option("--db", o->db, "Record into this SQLite store as a new session (prints its id last)");
+  out->add_option("--euroc", o->euroc, "Write an EuRoC/ASL dataset (mav0/imu0, mav0/state_groundtruth_estimate0)");
+  out->add_option("--pty", o->pty, "Create a pseudo-terminal, link it at this path, and stream in real time");
+  out->add_option("--file", o->file, "Write the wire bytes to this file");
+  out->require_option(1);
+  return [o] {
+    const sim::SimConfig config = make_config(*o);
+    if (!o->db.empty()) return record_to_db(*o, config);
+    if (!o->euroc.empty()) return write_euroc(*o, config);
+    return stream_bytes(*o, config);
+  };
+});
+
+}  // namespace
+}  // namespace imubridge::cli

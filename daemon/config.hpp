@@ -1,0 +1,75 @@
+#pragma once
+// What `imubridge run` is configured with: plain values, defaults included. The TOML file that fills them
+// (/etc/imubridge/imubridge.toml) and every key's meaning: docs/config.md.
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "protocol/calibration.hpp"
+#include "protocol/wire_format.hpp"
+
+namespace imubridge::daemon {
+
+// A network address: "udp://127.0.0.1:14550", "tcp://127.0.0.1:5760" (we connect), "tcp-listen://127.0.0.1:5760"
+// (we accept), or "unix:///run/imubridge/lines.sock" (a stream socket we listen on).
+struct Endpoint {
+  enum class Kind { udp, tcp_connect, tcp_listen, unix_listen };
+  Kind kind = Kind::udp;
+  std::string host = "127.0.0.1";  // network outputs stay on loopback unless configured otherwise
+  std::uint16_t port = 0;
+  std::filesystem::path path;  // unix sockets
+  std::string text;            // as written in the config, for messages
+};
+
+// Which device a link reads: a path, or a USB identity found again after the device re-enumerates.
+struct DeviceSelector {
+  std::filesystem::path path;                // e.g. /dev/ttyUSB0, /dev/serial/by-id/..., or a pty symlink
+  std::optional<std::uint16_t> usb_vid, usb_pid;
+  std::optional<std::string> usb_serial;     // with vid/pid: the one radio of several identical ones
+};
+
+struct VehicleFeedbackConfig {
+  bool enabled = false;
+  double rate_hz = 10.0;                          // velocity estimates sent back to the vehicle, at most this often
+  std::uint64_t xbee_destination64 = 0x000000000000FFFF;  // XBee links: the vehicle radio (default: broadcast)
+};
+
+struct LinkConfig {
+  std::string name;  // unique; names the link in the store, logs and outputs
+  DeviceSelector device;
+  protocol::WireFormat format = protocol::WireFormat::imubridge;
+  std::uint32_t baud = 115200;
+  protocol::Calibration calibration = protocol::Calibration::reference_board();
+  std::vector<Endpoint> bridge;  // raw bytes forwarded both ways (e.g. QGroundControl on udp://127.0.0.1:14550)
+  VehicleFeedbackConfig feedback;
+  std::chrono::milliseconds reconnect_min{200}, reconnect_max{5000};  // retry backoff after the port vanishes
+};
+
+struct StoreConfig {
+  std::filesystem::path path = "/var/lib/imubridge/imubridge.db";
+  std::chrono::milliseconds commit_interval{200};
+  std::uint64_t max_size_bytes = 0;            // 0: no cap; beyond it the database is rotated or recording stops
+  std::uint64_t min_free_bytes = 256ull << 20;  // keep this much free on the disk
+  enum class OnFull { rotate, stop } on_full = OnFull::rotate;
+};
+
+struct OutputsConfig {
+  std::optional<Endpoint> plotjuggler{};  // JSON per sample/estimate over UDP (PlotJuggler's default 127.0.0.1:9870)
+  std::vector<Endpoint> line_streams{};   // newline-delimited JSON to any subscriber (tcp-listen or unix)
+  std::uint32_t decimation = 1;         // publish every Nth sample (estimates likewise)
+};
+
+struct Config {
+  std::vector<LinkConfig> links;
+  StoreConfig store;
+  OutputsConfig outputs;
+  std::optional<std::filesystem::path> params;  // PARAMS.json from `imubridge identify`; none: compensation only
+  std::string log_level = "info";
+  std::optional<std::filesystem::path> log_file;  // none: stderr (the journal under systemd); reopened on SIGHUP
+  std::chrono::seconds stats_interval{60};  // counters logged this often (and on SIGUSR1)
+};
+
+}  // namespace imubridge::daemon

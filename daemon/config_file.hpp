@@ -1,0 +1,47 @@
+#pragma once
+// The TOML configuration of `imubridge run` (/etc/imubridge/imubridge.toml) and the --link shorthand. Every key and
+// its meaning: docs/config.md. A mistake is reported as one line naming the file, the line and the key, e.g.
+//   imubridge.toml:7: unknown key 'link[0].baudrate' (did you mean 'baud'?)
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "daemon/config.hpp"
+
+namespace imubridge::daemon {
+
+// Where `imubridge run` looks when no --config is given (a missing default file is not an error).
+inline const std::filesystem::path kDefaultConfigPath = "/etc/imubridge/imubridge.toml";
+
+// Parses TOML text; `source` names it in messages (a file name). Throws std::invalid_argument with one line for a
+// syntax error, an unknown key, a wrongly typed or out-of-range value, or inconsistent links. A file without links
+// is fine here: they may come from the command line.
+Config parse_config(std::string_view toml_text, std::string_view source);
+// Reads and parses a file; a file that cannot be read is a std::invalid_argument too.
+Config load_config(const std::filesystem::path& path);
+
+// The configuration as TOML that parse_config() reads back to the same Config: the session's config snapshot.
+std::string to_toml(const Config& config);
+
+// A link given on the command line: "NAME=DEVICE:PROTOCOL[:BAUD]". DEVICE is a path, or "usb:VID:PID[:SERIAL]" with
+// VID and PID in hex.
+struct LinkSpec {
+  std::string name;
+  DeviceSelector device;
+  protocol::WireFormat format = protocol::WireFormat::imubridge;
+  std::optional<std::uint32_t> baud;
+};
+// Throws std::invalid_argument naming the spec and what is wrong with it.
+LinkSpec parse_link_spec(std::string_view spec);
+// Command-line links take precedence: a link of the same name keeps its other settings (bridge, calibration, ...)
+// and takes the spec's device, protocol and baud (if given); a new name adds a link with default settings.
+void apply_link_spec(Config& config, const LinkSpec& spec);
+
+// The whole configuration, once assembled from the file and the command line: it names at least one link, and
+// validate_links() (which parse_config() runs) finds nothing wrong with its links: names, backoff, feedback.
+void validate(const Config& config, std::string_view source);
+void validate_links(const Config& config, std::string_view source);
+
+}  // namespace imubridge::daemon

@@ -1,0 +1,530 @@
+#include "daemon/daemon.hpp"
+
+#include <spdlog/pattern_formatter.h>
+#include <spdlog/sinks/basic_file_sink.h>
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
+#include <sys/statvfs.h>
+
+#include <boost/asio/post.hpp>
+#include <csignal>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+#include "daemon/bridge.hpp"
+#include "daemon/config_file.hpp"
+#include "daemon/outputs.hpp"
+#include "daemon/port_list.hpp"
+#include "daemon/serial_link.hpp"
+#include "daemon/vehicle_feedback.hpp"
+#include "pipeline/estimation_stage.hpp"
+#include "pipeline/link_recorder.hpp"
+#include "pipeline/session_config.hpp"
+#include "replay/replayer.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::daemon {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+constexpr double kMiB = 1024.0 * 1024.0;
+
+std::int64_t mono_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+std::int64_t wall_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// journald reads a leading "<N>" as the line's syslog priority.
+class SyslogPriority : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&, spdlog::memory_buf_t& dest) override {
+    static constexpr std::string_view kPriority[] = {"<7>", "<7>", "<6>", "<4>", "<3>", "<2>", ""};
+    const std::string_view p = kPriority[msg.level];
+    dest.append(p.data(), p.data() + p.size());
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override { return std::make_unique<SyslogPriority>(); }
+};
+
+// imubridge.db -> imubridge-20240521-143000.db beside it (UTC), with -2, -3, ... should that name be taken.
+fs::path rotated_path(const fs::path& base) {
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &utc);
+  const std::string stem = base.stem().string() + "-" + stamp;
+  fs::path path = base.parent_path() / (stem + base.extension().string());
+  for (int n = 2; fs::exists(path); ++n) {
+    path = base.parent_path() / (stem + "-" + std::to_string(n) + base.extension().string());
+  }
+  return path;
+}
+
+// The database and its write-ahead log: SQLite moves pages from one to the other at checkpoints.
+std::uint64_t database_size(const fs::path& path) {
+  std::error_code ec;
+  std::uint64_t size = 0;
+  for (const fs::path& file : {path, fs::path(path.string() + "-wal")}) {
+    const auto n = fs::file_size(file, ec);
+    if (!ec) size += n;
+  }
+  return size;
+}
+
+std::string mib(std::uint64_t bytes) { return fmt::format("{:.1f} MiB", static_cast<double>(bytes) / kMiB); }
+
+}  // namespace
+
+estimator::ModelParams load_params(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  if (!in) throw std::invalid_argument(path.string() + ": cannot read the parameters file");
+  return replay::parse_params(text.str(), path.string());
+}
+
+void configure_logging(const Config& config) {
+  spdlog::sink_ptr sink;
+  if (config.log_file) {
+    sink = std::make_shared<spdlog::sinks::basic_file_sink_mt>(config.log_file->string());
+  } else {
+    sink = std::make_shared<spdlog::sinks::stderr_sink_mt>();
+  }
+  auto formatter = std::make_unique<spdlog::pattern_formatter>();
+  if (!config.log_file && stderr_is_journal()) {
+    formatter->add_flag<SyslogPriority>('*').set_pattern("%*%v");
+  } else {
+    formatter->set_pattern("%Y-%m-%d %H:%M:%S.%e %l: %v");
+  }
+  sink->set_formatter(std::move(formatter));
+  auto logger = std::make_shared<spdlog::logger>("imubridge", sink);
+  logger->set_level(spdlog::level::from_str(config.log_level));
+  logger->flush_on(spdlog::level::trace);  // lines are rare; each must reach the file before a crash could lose it
+  spdlog::set_default_logger(std::move(logger));
+}
+
+struct Daemon::Recording {
+  Recording(const fs::path& file, const StoreConfig& config)
+      : path(file), store(file, store::StoreOptions{.commit_interval = config.commit_interval}) {}
+  fs::path path;
+  store::Store store;
+  std::int64_t session = 0, run = 0;
+};
+
+struct Daemon::Link {
+  LinkConfig config;
+  std::unique_ptr<SerialLink> port;
+  std::unique_ptr<LinkBridge> bridge;
+  std::optional<VehicleFeedback> feedback;
+  std::int64_t store_link = 0;  // in the current recording; also the link id of its samples while not recording
+  std::unique_ptr<pipeline::LinkRecorder> recorder;          // while recording
+  std::unique_ptr<pipeline::LinkDecoder> decoder;            // while not: the samples still reach estimates and outputs
+  std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
+  std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
+  std::optional<std::int64_t> lost_at_ns;
+
+  const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }
+  void retire_decoder() {
+    if (!recorder && !decoder) return;
+    for (const auto& [layer, counters] : current_decoder().counters()) retired[layer] += counters;
+    recorder.reset();
+    decoder.reset();
+  }
+};
+
+Daemon::Daemon(Config config, std::optional<fs::path> config_file)
+    : config_(std::move(config)),
+      config_file_(std::move(config_file)),
+      params_(config_.params ? load_params(*config_.params) : estimator::ModelParams{}),
+      signals_(io_, SIGINT, SIGTERM, SIGHUP),
+      commit_timer_(io_),
+      stats_timer_(io_),
+      watchdog_timer_(io_) {
+  signals_.add(SIGUSR1);
+  estimation_ = std::make_unique<pipeline::EstimationStage>(params_);  // bad parameters fail here, before any I/O
+  outputs_ = std::make_unique<Outputs>(io_, config_.outputs);
+  for (const LinkConfig& link_config : config_.links) {
+    auto link = std::make_unique<Link>();
+    Link& l = *link;
+    l.config = link_config;
+    l.port = std::make_unique<SerialLink>(
+        io_, link_config,
+        SerialLink::Handlers{
+            .on_data = [this, &l](std::span<const std::uint8_t> bytes) { on_data(l, bytes); },
+            .on_open = [this, &l](const std::string& path, bool reopened) { on_open(l, path, reopened); },
+            .on_lost = [this, &l](const std::string& reason) { on_lost(l, reason); }});
+    if (!link_config.bridge.empty()) {
+      l.bridge = std::make_unique<LinkBridge>(
+          io_, link_config.bridge, [this, &l](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); });
+    }
+    if (link_config.feedback.enabled) l.feedback.emplace(link_config.format, link_config.feedback);
+    links_.push_back(std::move(link));
+  }
+  open_recording(config_.store.path, "");
+}
+
+Daemon::~Daemon() = default;
+
+int Daemon::run() {
+  for (auto& link : links_) link->port->start();
+  wait_for_signal();
+  every(commit_timer_, config_.store.commit_interval, &Daemon::commit_tick);
+  every(stats_timer_, config_.stats_interval, &Daemon::stats_tick);
+  // From the event loop, so a loop stuck for WatchdogSec is what systemd restarts.
+  if (auto period = systemd_.watchdog_period()) every(watchdog_timer_, *period, &Daemon::watchdog_tick);
+  systemd_.ready(status_line());
+  spdlog::info("running: {}", status_line());
+  io_.run();
+  return 0;
+}
+
+void Daemon::stop() {
+  boost::asio::post(io_, [this] { shutdown(); });
+}
+
+// --- Recording ---------------------------------------------------------------------------------------------------
+
+void Daemon::open_recording(const fs::path& path, const std::string& continues) {
+  if (auto problem = storage_problem()) {
+    spdlog::error("not recording: {}", *problem);
+    use_decoders();
+    return;
+  }
+  auto r = std::make_unique<Recording>(path, config_.store);
+  const std::int64_t wall = wall_now_ns();
+  nlohmann::json snapshot{{"imubridge_run", to_toml(config_)}};
+  std::vector<pipeline::RecordedLink> recorded;
+  std::string source = "imubridge run:";
+  for (const auto& link : links_) {
+    recorded.push_back({link->config.name, link->config.format, link->config.calibration});
+    source += fmt::format(" {} {} ({} @ {} baud);", link->config.name, describe(link->config.device),
+                          protocol::wire_format_name(link->config.format), link->config.baud);
+  }
+  source.pop_back();
+  pipeline::add_recorded_links(snapshot, recorded);
+  r->session =
+      r->store.begin_session({.kind = "live", .source = source, .config = snapshot.dump(), .started_wall_ns = wall});
+  if (!continues.empty()) {
+    r->store.append_event(
+        r->session, {.mono_ns = mono_now_ns(), .wall_ns = wall, .kind = "note", .detail = "continues " + continues});
+  }
+  for (auto& link : links_) {
+    const LinkConfig& c = link->config;
+    link->store_link = r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
+                                         fmt::format("{} @ {} baud", describe(c.device), c.baud));
+    link->retire_decoder();
+    link->recorder = std::make_unique<pipeline::LinkRecorder>(r->store, r->session, link->store_link, c.name, c.format,
+                                                              c.calibration);
+  }
+  r->run = r->store.begin_run(r->session,
+                              {.kind = "live", .params_json = nlohmann::json(params_).dump(), .created_wall_ns = wall});
+  // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
+  estimation_ = std::make_unique<pipeline::EstimationStage>(params_);
+  spdlog::info("recording session {} into {}{}", r->session, path.string(),
+               config_.params ? " with parameters from " + config_.params->string()
+                              : " (no parameters: velocity is not estimated)");
+  recording_ = std::move(r);
+}
+
+// Ends the session as cleanly as the store still allows. The decoders' last frames are recorded and estimated (they
+// come too late for the outputs).
+void Daemon::close_recording() {
+  if (!recording_) return;
+  std::unique_ptr<Recording> r = std::move(recording_);  // from here on record() writes nothing
+  const std::int64_t mono = mono_now_ns(), wall = wall_now_ns();
+  std::vector<protocol::Sample> tail;
+  try {
+    for (auto& link : links_) {
+      tail.clear();
+      link->recorder->finish(mono, wall, tail);
+      for (const auto& sample : tail) {
+        if (const auto estimate = estimation_->update(sample)) r->store.append_estimate(r->run, *estimate);
+      }
+    }
+    r->store.end_session(r->session, wall);
+    r->store.commit();
+    spdlog::info("session {} in {} ended", r->session, r->path.string());
+  } catch (const store::StoreError& e) {
+    spdlog::warn("session {} in {} could not be ended cleanly: {}", r->session, r->path.string(), e.what());
+  }
+  use_decoders();
+}
+
+void Daemon::use_decoders() {
+  for (auto& link : links_) {
+    if (link->decoder) continue;
+    link->retire_decoder();
+    // Each XBee radio keeps a link id of its own, so no estimator ever mixes two vehicles' samples.
+    link->decoder = std::make_unique<pipeline::LinkDecoder>(
+        link->config.format, static_cast<std::uint32_t>(link->store_link), link->config.calibration,
+        [ids = std::map<std::uint64_t, std::uint32_t>()](std::uint64_t source64) mutable {
+          return ids.try_emplace(source64, 0x80000000u + static_cast<std::uint32_t>(ids.size())).first->second;
+        });
+  }
+}
+
+void Daemon::stop_recording(const std::string& reason) {
+  spdlog::error("recording stopped: {}; links and outputs go on", reason);
+  close_recording();
+  systemd_.status(status_line());
+}
+
+void Daemon::rotate() {
+  const fs::path next = rotated_path(config_.store.path);
+  const std::string previous = fmt::format("{} session {}", recording_->path.filename().string(), recording_->session);
+  spdlog::info("{} reached store.max_size_mib ({}): continuing in {}", recording_->path.string(),
+               mib(config_.store.max_size_bytes), next.string());
+  record([&](Recording& r) {
+    r.store.append_event(r.session, {.mono_ns = mono_now_ns(),
+                                     .wall_ns = wall_now_ns(),
+                                     .kind = "note",
+                                     .detail = "continued in " + next.filename().string() + " (store.max_size_mib)"});
+  });
+  if (!recording_) return;  // that write failed: recording has stopped
+  close_recording();
+  ++rotations_;
+  try {
+    open_recording(next, previous);
+  } catch (const store::StoreError& e) {
+    stop_recording(e.what());
+  }
+}
+
+std::optional<std::string> Daemon::storage_problem() const {
+  const fs::path dir = fs::absolute(config_.store.path).parent_path();
+  struct statvfs vfs {};
+  if (::statvfs(dir.c_str(), &vfs) != 0) return std::nullopt;  // a missing directory: opening the store says so
+  const auto free = static_cast<std::uint64_t>(vfs.f_bavail) * vfs.f_frsize;
+  if (free >= config_.store.min_free_bytes) return std::nullopt;
+  return fmt::format("only {} free on {}, below store.min_free_mib ({})", mib(free), dir.string(),
+                     mib(config_.store.min_free_bytes));
+}
+
+void Daemon::check_storage() {
+  if (!recording_) return;
+  if (auto problem = storage_problem()) return stop_recording(*problem);
+  const std::uint64_t cap = config_.store.max_size_bytes;
+  if (cap == 0 || database_size(recording_->path) < cap) return;
+  if (config_.store.on_full == StoreConfig::OnFull::rotate) return rotate();
+  stop_recording(fmt::format("{} reached store.max_size_mib ({})", recording_->path.string(), mib(cap)));
+}
+
+template <typename Write>
+void Daemon::record(Write&& write) {
+  if (!recording_) return;
+  try {
+    write(*recording_);
+  } catch (const store::StoreError& e) {
+    stop_recording(e.what());
+  }
+}
+
+// --- Links -------------------------------------------------------------------------------------------------------
+
+void Daemon::on_open(Link& link, const std::string& path, bool reopened) {
+  const std::int64_t mono = mono_now_ns();
+  std::string detail = path;
+  if (reopened && link.lost_at_ns) detail += fmt::format(" after {:.1f} s", (mono - *link.lost_at_ns) * 1e-9);
+  record([&](Recording& r) {
+    r.store.append_event(r.session, {.link_id = link.store_link,
+                                     .mono_ns = mono,
+                                     .wall_ns = wall_now_ns(),
+                                     .kind = reopened ? "reconnect" : "connected",
+                                     .detail = detail});
+  });
+  systemd_.status(status_line());
+}
+
+void Daemon::on_lost(Link& link, const std::string& reason) {
+  link.lost_at_ns = mono_now_ns();
+  record([&](Recording& r) {
+    r.store.append_event(r.session, {.link_id = link.store_link,
+                                     .mono_ns = *link.lost_at_ns,
+                                     .wall_ns = wall_now_ns(),
+                                     .kind = "link_lost",
+                                     .detail = reason});
+  });
+  systemd_.status(status_line());
+}
+
+void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
+  const std::int64_t mono = mono_now_ns(), wall = wall_now_ns();
+  samples_.clear();
+  if (link.recorder) {
+    try {
+      link.recorder->on_chunk(bytes, mono, wall, samples_);
+    } catch (const store::StoreError& e) {
+      stop_recording(e.what());
+      samples_.clear();
+      link.decoder->feed(bytes, mono, samples_);
+    }
+  } else {
+    link.decoder->feed(bytes, mono, samples_);
+  }
+  if (link.bridge) link.bridge->from_link(bytes);
+  process(link, mono);
+  record([&](Recording& r) { commits_ += r.store.commit_if_due(Clock::now()); });
+}
+
+void Daemon::process(Link& link, std::int64_t mono_ns) {
+  link.samples += samples_.size();
+  for (const protocol::Sample& sample : samples_) {
+    const std::optional<store::Estimate> estimate = estimation_->update(sample);
+    if (estimate) {
+      ++link.estimates;
+      record([&](Recording& r) { r.store.append_estimate(r.run, *estimate); });
+      if (link.feedback) {
+        if (auto bytes = link.feedback->on_estimate(*estimate, mono_ns)) write_to_link(link, *bytes);
+      }
+    }
+    outputs_->publish(link.config.name, sample, estimate ? &*estimate : nullptr);
+  }
+}
+
+// Bytes for the vehicle (velocity feedback, a ground-control station's commands) are recorded as tx chunks.
+void Daemon::write_to_link(Link& link, std::span<const std::uint8_t> bytes) {
+  if (!link.port->write(bytes)) return;
+  ++link.tx_chunks;
+  record([&](Recording& r) {
+    r.store.append_chunk(r.session, link.store_link, store::Direction::tx, mono_now_ns(), wall_now_ns(), bytes);
+  });
+}
+
+// --- Operations --------------------------------------------------------------------------------------------------
+
+void Daemon::wait_for_signal() {
+  signals_.async_wait([this](const boost::system::error_code& ec, int signal) {
+    if (ec) return;
+    if (signal == SIGHUP) {
+      reload();
+    } else if (signal == SIGUSR1) {
+      log_stats();
+    } else {
+      spdlog::info("{}: stopping", signal == SIGINT ? "SIGINT" : "SIGTERM");
+      return shutdown();
+    }
+    wait_for_signal();
+  });
+}
+
+// SIGHUP: the outputs and logging settings of the configuration file take effect, and the log file is reopened
+// (after logrotate moved it). Links and the store keep running as they are: changing them needs a restart.
+void Daemon::reload() {
+  if (config_file_) {
+    try {
+      const Config fresh = load_config(*config_file_);
+      outputs_->reconfigure(fresh.outputs);
+      config_.outputs = fresh.outputs;
+      config_.log_level = fresh.log_level;
+      config_.log_file = fresh.log_file;
+    } catch (const std::exception& e) {
+      spdlog::error("SIGHUP: {}; keeping the running configuration", e.what());
+    }
+  }
+  try {
+    configure_logging(config_);
+  } catch (const spdlog::spdlog_ex& e) {
+    spdlog::error("SIGHUP: cannot reopen the log: {}", e.what());
+  }
+  spdlog::info("SIGHUP: reloaded {}", config_file_ ? config_file_->string() : "the log (no configuration file)");
+}
+
+void Daemon::every(boost::asio::steady_timer& timer, std::chrono::nanoseconds period, void (Daemon::*tick)()) {
+  timer.expires_after(period);
+  timer.async_wait([this, &timer, period, tick](const boost::system::error_code& ec) {
+    if (ec) return;  // cancelled: stopping
+    (this->*tick)();
+    every(timer, period, tick);
+  });
+}
+
+void Daemon::commit_tick() {
+  record([&](Recording& r) {
+    if (r.store.pending_rows() > 0) {
+      r.store.commit();
+      ++commits_;
+    }
+  });
+  check_storage();
+}
+
+void Daemon::stats_tick() {
+  log_stats();
+  systemd_.status(status_line());
+}
+
+void Daemon::log_stats() const { spdlog::info("stats {}", counters().dump()); }
+
+void Daemon::watchdog_tick() { systemd_.watchdog(); }
+
+void Daemon::shutdown() {
+  if (stopping_) return;
+  stopping_ = true;
+  systemd_.stopping();
+  for (auto& link : links_) link->port->stop();
+  boost::system::error_code ignored;
+  signals_.cancel(ignored);
+  commit_timer_.cancel();
+  stats_timer_.cancel();
+  watchdog_timer_.cancel();
+  close_recording();
+  log_stats();
+  io_.stop();
+}
+
+std::string Daemon::status_line() const {
+  std::string status = recording_
+                           ? fmt::format("recording session {} into {}", recording_->session, recording_->path.string())
+                           : std::string("NOT recording");
+  for (const auto& link : links_) {
+    status += fmt::format("; {} {} ({} samples)", link->config.name,
+                          link->port->is_open() ? link->port->path() : "waiting for " + describe(link->config.device),
+                          link->samples);
+  }
+  return status;
+}
+
+nlohmann::json Daemon::counters() const {
+  nlohmann::json links = nlohmann::json::object();
+  for (const auto& link : links_) {
+    const SerialLink::Counters& port = link->port->counters();
+    nlohmann::json decoders = nlohmann::json::object();
+    std::map<std::string, protocol::DecoderCounters> totals = link->retired;
+    for (const auto& [layer, counters] : link->current_decoder().counters()) totals[layer] += counters;
+    for (const auto& [layer, counters] : totals) decoders[layer] = counters;
+    nlohmann::json j{{"device", link->port->is_open() ? nlohmann::json(link->port->path()) : nlohmann::json()},
+                     {"bytes_read", port.bytes_read},
+                     {"reads", port.reads},
+                     {"decoders", decoders},
+                     {"samples", link->samples},
+                     {"estimates", link->estimates},
+                     {"opens", port.opens},
+                     {"losses", port.losses},
+                     {"failed_opens", port.failed_opens},
+                     {"tx",
+                      {{"chunks", link->tx_chunks},
+                       {"bytes_written", port.bytes_written},
+                       {"bytes_dropped", port.bytes_dropped_tx},
+                       {"queue_bytes", port.tx_queue_bytes}}}};
+    if (link->bridge) j["bridge"] = link->bridge->counters();
+    if (link->feedback) j["feedback"] = link->feedback->counters();
+    links[link->config.name] = std::move(j);
+  }
+  nlohmann::json store{{"recording", recording_ != nullptr}, {"commits", commits_}, {"rotations", rotations_}};
+  if (recording_) {
+    store["path"] = recording_->path.string();
+    store["session"] = recording_->session;
+    store["pending_rows"] = recording_->store.pending_rows();
+    store["size_bytes"] = database_size(recording_->path);
+  }
+  return {{"links", links}, {"store", store}, {"outputs", outputs_->counters()}};
+}
+
+}  // namespace imubridge::daemon

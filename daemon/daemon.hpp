@@ -1,0 +1,104 @@
+#pragma once
+// `imubridge run`: the ground-station daemon. One io_context thread serves every link: each chunk a port returns is
+// recorded (raw bytes, samples, losses: pipeline::LinkRecorder), estimated (pipeline::EstimationStage, into this
+// session's live run), forwarded to the link's bridge, and published on the outputs. Operations (signals, systemd,
+// storage limits, logs): docs/operations.md.
+#include <utility>  // before Boost.Asio, which uses std::exchange without including it
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/systemd_notify.hpp"
+#include "estimator/params.hpp"
+#include "protocol/sample.hpp"
+
+namespace imubridge::pipeline {
+class EstimationStage;
+}
+
+namespace imubridge::daemon {
+
+class Outputs;
+
+// PARAMS.json as `imubridge identify` writes it. Throws std::invalid_argument naming the file and what is wrong.
+estimator::ModelParams load_params(const std::filesystem::path& path);
+
+// spdlog's default logger for the daemon: config.log_file if set, else stderr; on the journal, lines carry a syslog
+// priority instead of a timestamp (journald keeps its own). Called again on SIGHUP, which reopens the file.
+void configure_logging(const Config& config);
+
+class Daemon {
+ public:
+  // Loads the parameters (std::invalid_argument), opens the outputs (std::runtime_error when a socket cannot be
+  // opened) and the store (store::StoreError). `config_file`, when there is one, is read again on SIGHUP.
+  explicit Daemon(Config config, std::optional<std::filesystem::path> config_file = {});
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  // Starts the links and serves them until SIGINT or SIGTERM (or stop()), then ends the session. Returns 0.
+  int run();
+  // From any thread: what SIGTERM does.
+  void stop();
+
+  // Everything counted so far, per link, for the store and the outputs: what the stats log line and SIGUSR1 show.
+  nlohmann::json counters() const;
+
+ private:
+  struct Link;
+  struct Recording;
+
+  void open_recording(const std::filesystem::path& path, const std::string& continues);
+  void close_recording();
+  void stop_recording(const std::string& reason);
+  void rotate();
+  void check_storage();
+  std::optional<std::string> storage_problem() const;
+  // Runs a store write; a failure ends the recording, never the daemon.
+  template <typename Write>
+  void record(Write&& write);
+
+  void on_open(Link& link, const std::string& path, bool reopened);
+  void on_lost(Link& link, const std::string& reason);
+  void on_data(Link& link, std::span<const std::uint8_t> bytes);
+  void process(Link& link, std::int64_t mono_ns);
+  void write_to_link(Link& link, std::span<const std::uint8_t> bytes);
+  void use_decoders();
+
+  void wait_for_signal();
+  void reload();
+  // Calls `tick` every `period` until the timer is cancelled.
+  void every(boost::asio::steady_timer& timer, std::chrono::nanoseconds period, void (Daemon::*tick)());
+  void commit_tick();
+  void stats_tick();
+  void log_stats() const;
+  void watchdog_tick();
+  void shutdown();
+  std::string status_line() const;
+
+  Config config_;
+  std::optional<std::filesystem::path> config_file_;
+  estimator::ModelParams params_;
+  boost::asio::io_context io_;
+  boost::asio::signal_set signals_;
+  boost::asio::steady_timer commit_timer_, stats_timer_, watchdog_timer_;
+  SystemdNotifier systemd_;
+  std::unique_ptr<Outputs> outputs_;
+  std::unique_ptr<Recording> recording_;  // none once recording stopped (disk full, write error)
+  std::unique_ptr<pipeline::EstimationStage> estimation_;
+  std::vector<std::unique_ptr<Link>> links_;
+  std::vector<protocol::Sample> samples_;  // of the chunk being processed: reused, so a chunk allocates nothing
+  std::uint64_t commits_ = 0, rotations_ = 0;
+  bool stopping_ = false;
+};
+
+}  // namespace imubridge::daemon

@@ -1,0 +1,62 @@
+#pragma once
+// Live outputs of `imubridge run`: every sample (with its estimate, when there is one) as JSON to PlotJuggler over
+// UDP and as a line to every subscriber of a line stream. Message shapes and counters: docs/outputs.md.
+#include <utility>  // before Boost.Asio
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/udp.hpp>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/endpoint.hpp"
+#include "protocol/sample.hpp"
+#include "store/records.hpp"
+
+namespace imubridge::daemon {
+
+// A slow subscriber may fall this far behind (about a second of lines at 1 kHz) before its lines are dropped.
+inline constexpr std::size_t kMaxQueuedBytesPerSubscriber = 256 * 1024;
+
+// Call every member from the io_context's thread. Opening a socket that fails throws std::runtime_error naming the
+// endpoint; a plotjuggler endpoint that is not udp://, or a line stream that is not tcp-listen:// or unix://, throws
+// std::invalid_argument.
+class Outputs {
+ public:
+  Outputs(boost::asio::io_context& io, const OutputsConfig& config);
+  ~Outputs();
+  Outputs(const Outputs&) = delete;
+  Outputs& operator=(const Outputs&) = delete;
+
+  // Never blocks: a datagram that finds the send buffer full, or a line a slow subscriber has no room for, is dropped
+  // and counted (the store, not the outputs, is where nothing may be lost). Each link's samples are decimated
+  // separately, and an estimate goes (or is skipped) with the sample it comes with.
+  void publish(std::string_view link, const protocol::Sample& sample, const store::Estimate* estimate_or_null);
+  // SIGHUP: re-opens what changed and keeps the rest, subscribers included. If a new socket cannot be opened it
+  // throws, and the outputs stay as they were.
+  void reconfigure(const OutputsConfig& config);
+  nlohmann::json counters() const;
+
+ private:
+  struct PlotJuggler {
+    Endpoint endpoint;
+    boost::asio::ip::udp::socket socket;
+    boost::asio::ip::udp::endpoint target;
+    std::uint64_t datagrams_sent = 0, datagrams_dropped = 0;
+  };
+
+  boost::asio::io_context& io_;
+  std::uint32_t decimation_ = 1;
+  std::unique_ptr<PlotJuggler> plotjuggler_;
+  std::vector<std::shared_ptr<StreamServer>> line_streams_;
+  std::map<std::string, std::uint64_t, std::less<>> samples_seen_;  // per link, for decimation
+  std::uint64_t samples_published_ = 0;
+};
+
+}  // namespace imubridge::daemon

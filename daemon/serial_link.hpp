@@ -1,0 +1,78 @@
+#pragma once
+// One serial port of `imubridge run`: opened by path or USB identity, read asynchronously, and reopened with
+// exponential backoff whenever it vanishes (USB unplugged, radio reset, pty closed) or is not there yet. Reading
+// goes on for as long as the link exists: no failure of the port is ever final.
+#include <utility>  // before Boost.Asio, which uses std::exchange without including it
+
+#include <array>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/serial_port.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+
+namespace imubridge::daemon {
+
+class SerialLink {
+ public:
+  struct Handlers {
+    // Bytes exactly as one read returned them.
+    std::function<void(std::span<const std::uint8_t>)> on_data;
+    // The port is open: `path` is what the device resolved to; `reopened` after a loss, not on the first open.
+    std::function<void(const std::string& path, bool reopened)> on_open;
+    // The open port failed (read error or end of file); reconnecting starts.
+    std::function<void(const std::string& reason)> on_lost;
+  };
+  struct Counters {
+    std::uint64_t bytes_read = 0, reads = 0;
+    std::uint64_t bytes_written = 0, bytes_dropped_tx = 0;  // tx: dropped when closed or the queue is full
+    std::uint64_t opens = 0, losses = 0, failed_opens = 0;
+    std::size_t tx_queue_bytes = 0;
+  };
+  // Bytes waiting to be written beyond which writes are dropped: a port that cannot keep up must not hold memory.
+  static constexpr std::size_t kMaxTxQueueBytes = 64 * 1024;
+
+  SerialLink(boost::asio::io_context& io, const LinkConfig& config, Handlers handlers);
+  SerialLink(const SerialLink&) = delete;
+  SerialLink& operator=(const SerialLink&) = delete;
+
+  void start();  // the first open is attempted at once; failure is logged once and retried like a loss
+  void stop();   // closes the port; no handler is called after this
+  // Never blocks. Returns false (and counts the bytes) when they are dropped: port closed or queue full.
+  bool write(std::span<const std::uint8_t> bytes);
+
+  bool is_open() const { return port_.is_open(); }
+  const std::string& path() const { return path_; }  // the device's path while open
+  const Counters& counters() const { return counters_; }
+
+ private:
+  void try_open();
+  void open(const std::string& path);
+  void read();
+  void lost(const std::string& reason);
+  void retry_later();
+  void write_next();
+
+  const LinkConfig config_;
+  Handlers handlers_;
+  boost::asio::serial_port port_;
+  boost::asio::steady_timer retry_timer_;
+  std::chrono::milliseconds backoff_;
+  bool stopped_ = true;
+  bool ever_opened_ = false;
+  bool failure_logged_ = false;  // one log line per outage, however many attempts it takes
+  std::string path_;
+  std::array<std::uint8_t, 4096> buffer_{};
+  std::deque<std::vector<std::uint8_t>> tx_queue_;
+  bool writing_ = false;
+  Counters counters_;
+};
+
+}  // namespace imubridge::daemon

@@ -1,0 +1,235 @@
+// The configuration of `imubridge run`: TOML keys to Config, one-line errors naming the key, the --link shorthand,
+// and the snapshot a session keeps.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "daemon/config_file.hpp"
+#include "pipeline/session_config.hpp"
+
+namespace imubridge::daemon {
+namespace {
+
+using namespace std::chrono_literals;
+
+// The one-line message parse_config() throws, or "" when it accepts the text.
+std::string error_of(const std::string& toml) {
+  try {
+    parse_config(toml, "test.toml");
+    return "";
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+}
+
+const std::string kLink = "[[link]]\nname = \"imu\"\ndevice = \"/dev/ttyUSB0\"\n";
+
+TEST(ConfigFile, EveryKeyReachesItsField) {
+  const Config c = parse_config(R"(
+log_level = "debug"
+log_file = "/var/log/imubridge.log"
+stats_interval_s = 5
+params = "p.json"
+[store]
+path = "/data/flights.db"
+commit_interval_ms = 100
+max_size_mib = 1.5
+min_free_mib = 10
+on_full = "stop"
+[outputs]
+plotjuggler = "udp://127.0.0.1:9870"
+line_streams = ["tcp-listen://127.0.0.1:9871", "unix:///tmp/lines.sock"]
+decimation = 4
+[[link]]
+name = "radio"
+usb = { vid = 0x0403, pid = 0x6015, serial = "DN02ABCD" }
+protocol = "xbee-escaped"
+baud = 57600
+reconnect_min_ms = 50
+reconnect_max_ms = 800
+bridge = ["udp://127.0.0.1:14550"]
+[link.feedback]
+rate_hz = 5
+xbee_destination64 = "0013A20040A1B2C3"
+[link.calibration.gyro]
+sign = [1, -1, -1]
+[[link]]
+name = "fc"
+device = "/dev/ttyACM0"
+protocol = "mavlink"
+)",
+                                "test.toml");
+  EXPECT_EQ(c.log_level, "debug");
+  EXPECT_EQ(c.log_file, std::filesystem::path("/var/log/imubridge.log"));
+  EXPECT_EQ(c.stats_interval, 5s);
+  EXPECT_EQ(c.params, std::filesystem::path("p.json"));
+  EXPECT_EQ(c.store.path, "/data/flights.db");
+  EXPECT_EQ(c.store.commit_interval, 100ms);
+  EXPECT_EQ(c.store.max_size_bytes, 1572864u);  // 1.5 * 2^20
+  EXPECT_EQ(c.store.min_free_bytes, 10u << 20);
+  EXPECT_EQ(c.store.on_full, StoreConfig::OnFull::stop);
+  ASSERT_TRUE(c.outputs.plotjuggler.has_value());
+  EXPECT_EQ(c.outputs.plotjuggler->port, 9870);
+  ASSERT_EQ(c.outputs.line_streams.size(), 2u);
+  EXPECT_EQ(c.outputs.line_streams[1].kind, Endpoint::Kind::unix_listen);
+  EXPECT_EQ(c.outputs.decimation, 4u);
+
+  ASSERT_EQ(c.links.size(), 2u);
+  const LinkConfig& radio = c.links[0];
+  EXPECT_EQ(radio.name, "radio");
+  EXPECT_TRUE(radio.device.path.empty());
+  EXPECT_EQ(radio.device.usb_vid, 0x0403);
+  EXPECT_EQ(radio.device.usb_pid, 0x6015);
+  EXPECT_EQ(radio.device.usb_serial, "DN02ABCD");
+  EXPECT_EQ(radio.format, protocol::WireFormat::xbee_escaped);
+  EXPECT_EQ(radio.baud, 57600u);
+  EXPECT_EQ(radio.reconnect_min, 50ms);
+  EXPECT_EQ(radio.reconnect_max, 800ms);
+  ASSERT_EQ(radio.bridge.size(), 1u);
+  EXPECT_EQ(radio.bridge[0].port, 14550);
+  EXPECT_TRUE(radio.feedback.enabled) << "a [link.feedback] table enables feedback unless it says otherwise";
+  EXPECT_EQ(radio.feedback.rate_hz, 5.0);
+  EXPECT_EQ(radio.feedback.xbee_destination64, 0x0013A20040A1B2C3u);
+  const auto board = protocol::Calibration::reference_board();
+  EXPECT_EQ(radio.calibration.gyro.sign, (std::array<std::int8_t, 3>{1, -1, -1}));
+  EXPECT_EQ(radio.calibration.gyro.scale, board.gyro.scale) << "keys left out keep the reference board's values";
+  EXPECT_EQ(radio.calibration.accel.scale, board.accel.scale);
+
+  const LinkConfig& fc = c.links[1];
+  EXPECT_EQ(fc.device.path, "/dev/ttyACM0");
+  EXPECT_FALSE(fc.device.usb_vid.has_value());
+  EXPECT_EQ(fc.format, protocol::WireFormat::mavlink);
+  EXPECT_EQ(fc.baud, 115200u);
+  EXPECT_FALSE(fc.feedback.enabled);
+}
+
+TEST(ConfigFile, TheShippedExampleIsValid) {
+  const Config c = load_config(std::filesystem::path(IMUBRIDGE_SOURCE_DIR) / "systemd" / "imubridge.toml");
+  EXPECT_NO_THROW(validate(c, "imubridge.toml"));
+  EXPECT_EQ(c.store.path, "/var/lib/imubridge/imubridge.db");
+}
+
+TEST(ConfigFile, UnknownKeysAreNamedWithTheirLineAndLikelyMeaning) {
+  EXPECT_EQ(error_of(kLink + "baudrate = 9600\n"),
+            "test.toml:4: unknown key 'link[0].baudrate' (did you mean 'baud'?)");
+  EXPECT_EQ(error_of("stat_interval_s = 3\n"),
+            "test.toml:1: unknown key 'stat_interval_s' (did you mean 'stats_interval_s'?)");
+  EXPECT_EQ(error_of("[store]\nmax_size_mb = 3\n"),
+            "test.toml:2: unknown key 'store.max_size_mb' (did you mean 'max_size_mib'?)");
+  EXPECT_EQ(error_of(kLink + "[link.calibration.accel]\nscal = [1, 1, 1]\n"),
+            "test.toml:5: unknown key 'link[0].calibration.accel.scal' (did you mean 'scale'?)");
+  EXPECT_EQ(error_of("colour = \"blue\"\n"), "test.toml:1: unknown key 'colour'");
+}
+
+TEST(ConfigFile, BadValuesAreNamedWithTheirLine) {
+  EXPECT_EQ(error_of(kLink + "baud = \"fast\"\n"),
+            "test.toml:4: 'link[0].baud' must be an integer from 1 to 100000000");
+  EXPECT_EQ(error_of("[store]\non_full = \"panic\"\n"), "test.toml:2: 'store.on_full' must be one of 'rotate', 'stop'");
+  EXPECT_EQ(error_of("[store]\nmax_size_mib = 0.5\n"),
+            "test.toml:2: 'store.max_size_mib' must be 0 (no cap) or at least 1");
+  EXPECT_NE(error_of(kLink + "protocol = \"ubx\"\n").find("test.toml:4: 'link[0].protocol' "), std::string::npos);
+  EXPECT_NE(error_of("[outputs]\nplotjuggler = \"udp://127.0.0.1\"\n").find("test.toml:2: 'outputs.plotjuggler' "),
+            std::string::npos);
+  EXPECT_NE(error_of(kLink + "[link.calibration.gyro]\nsign = [1, 2, 1]\n").find("'link[0].calibration' is not usable"),
+            std::string::npos);
+  EXPECT_NE(error_of("link = 3\n").find("'link' must be an array of tables"), std::string::npos);
+  EXPECT_NE(error_of("[store\n").find("test.toml:1: "), std::string::npos);
+}
+
+TEST(ConfigFile, LinksMustBeUnambiguous) {
+  EXPECT_EQ(error_of("[[link]]\ndevice = \"/dev/x\"\n"), "test.toml:1: 'link[0]' needs a 'name'");
+  EXPECT_NE(error_of("[[link]]\nname = \"a\"\n").find("needs exactly one of 'device' (a path) and 'usb'"),
+            std::string::npos);
+  EXPECT_NE(error_of("[[link]]\nname = \"a\"\ndevice = \"/dev/x\"\nusb = { vid = 1, pid = 2 }\n")
+                .find("needs exactly one of"),
+            std::string::npos);
+  EXPECT_NE(error_of("[[link]]\nname = \"a\"\nusb = { vid = 1 }\n").find("needs 'vid' and 'pid'"), std::string::npos);
+  EXPECT_NE(error_of(kLink + kLink).find("the name is used twice"), std::string::npos);
+  EXPECT_NE(error_of("[[link]]\nname = \"a/b\"\ndevice = \"/dev/x\"\n").find("'name' must be"), std::string::npos);
+  EXPECT_NE(error_of(kLink + "reconnect_min_ms = 900\nreconnect_max_ms = 100\n").find("above reconnect_max_ms"),
+            std::string::npos);
+  EXPECT_NE(error_of(kLink + "protocol = \"mavlink\"\n[link.feedback]\nenabled = true\n").find("feedback:"),
+            std::string::npos);
+}
+
+TEST(ConfigFile, AFileWithoutLinksIsValidUntilNothingAddsAny) {
+  Config c = parse_config("[store]\npath = \"x.db\"\n", "test.toml");
+  EXPECT_THROW(validate(c, "test.toml"), std::invalid_argument);
+  apply_link_spec(c, parse_link_spec("imu=/dev/ttyUSB0:imubridge"));
+  EXPECT_NO_THROW(validate(c, "test.toml"));
+}
+
+TEST(ConfigFile, TheTomlSnapshotReadsBackToTheSameConfiguration) {
+  const Config original = parse_config(R"(
+params = "p.json"
+[store]
+max_size_mib = 3.25
+[outputs]
+line_streams = ["tcp-listen://127.0.0.1:9871"]
+[[link]]
+name = "radio"
+usb = { vid = 0x0403, pid = 0x6015 }
+protocol = "xbee"
+[link.feedback]
+rate_hz = 2.5
+[link.calibration]
+temperature_offset_c = 21.5
+[link.calibration.accel]
+scale = [0.1, 0.2, 0.30000000000000004]
+)",
+                                       "test.toml");
+  const std::string text = to_toml(original);
+  const Config copy = parse_config(text, "snapshot");
+  EXPECT_EQ(to_toml(copy), text);
+  EXPECT_EQ(copy.store.max_size_bytes, original.store.max_size_bytes);
+  EXPECT_EQ(copy.links[0].device.usb_pid, 0x6015);
+  EXPECT_FALSE(copy.links[0].device.usb_serial.has_value());
+  EXPECT_EQ(copy.links[0].feedback.rate_hz, 2.5);
+  EXPECT_EQ(copy.links[0].calibration.accel.scale, original.links[0].calibration.accel.scale) << "exact doubles";
+  EXPECT_EQ(copy.links[0].calibration.temperature_offset_c, 21.5);
+  EXPECT_EQ(copy.outputs.line_streams[0].port, 9871);
+}
+
+TEST(LinkSpec, PathsUsbIdentitiesProtocolsAndBaudRates) {
+  LinkSpec s = parse_link_spec("imu=/dev/ttyUSB0:imubridge");
+  EXPECT_EQ(s.name, "imu");
+  EXPECT_EQ(s.device.path, "/dev/ttyUSB0");
+  EXPECT_EQ(s.format, protocol::WireFormat::imubridge);
+  EXPECT_FALSE(s.baud.has_value());
+
+  s = parse_link_spec("fc=/dev/serial/by-id/usb-a:b-if00:mavlink:921600");  // colons inside the path
+  EXPECT_EQ(s.device.path, "/dev/serial/by-id/usb-a:b-if00");
+  EXPECT_EQ(s.format, protocol::WireFormat::mavlink);
+  EXPECT_EQ(s.baud, 921600u);
+
+  s = parse_link_spec("radio=usb:0403:6015:DN02ABCD:xbee-escaped:57600");
+  EXPECT_TRUE(s.device.path.empty());
+  EXPECT_EQ(s.device.usb_vid, 0x0403);
+  EXPECT_EQ(s.device.usb_pid, 0x6015);
+  EXPECT_EQ(s.device.usb_serial, "DN02ABCD");
+  EXPECT_EQ(s.format, protocol::WireFormat::xbee_escaped);
+  EXPECT_EQ(s.baud, 57600u);
+
+  for (const char* bad : {"/dev/ttyUSB0:imubridge", "imu=/dev/ttyUSB0", "imu=/dev/ttyUSB0:ubx", "imu=:imubridge",
+                          "imu=usb:0403:imubridge", "imu=usb:xyz:6015:imubridge", "imu=/dev/x:imubridge:0"}) {
+    EXPECT_THROW(parse_link_spec(bad), std::invalid_argument) << bad;
+  }
+}
+
+TEST(LinkSpec, TheCommandLineOverridesTheFilesLinkOfTheSameName) {
+  Config c =
+      parse_config(kLink + "protocol = \"xbee\"\nbaud = 57600\nbridge = [\"udp://127.0.0.1:14550\"]\n", "test.toml");
+  apply_link_spec(c, parse_link_spec("imu=/dev/ttyUSB3:xbee-escaped"));
+  apply_link_spec(c, parse_link_spec("other=/dev/ttyS1:mavlink:921600"));
+  ASSERT_EQ(c.links.size(), 2u);
+  EXPECT_EQ(c.links[0].device.path, "/dev/ttyUSB3");
+  EXPECT_EQ(c.links[0].format, protocol::WireFormat::xbee_escaped);
+  EXPECT_EQ(c.links[0].baud, 57600u) << "no baud in the spec: the file's stays";
+  EXPECT_EQ(c.links[0].bridge.size(), 1u) << "settings the spec cannot express stay";
+  EXPECT_EQ(c.links[1].name, "other");
+  EXPECT_EQ(c.links[1].baud, 921600u);
+}
+
+}  // namespace
+}  // namespace imubridge::daemon
