@@ -351,6 +351,10 @@ OutputsConfig read_outputs(Table& t) {
   return outputs;
 }
 
+std::string source_prefix(std::string_view source) {
+  return source.empty() ? std::string() : std::string(source) + ": ";
+}
+
 }  // namespace
 
 Config parse_config(std::string_view toml_text, std::string_view source) {
@@ -397,18 +401,17 @@ Config load_config(const std::filesystem::path& path) {
 
 void validate(const Config& config, std::string_view source) {
   if (config.links.empty()) {
-    throw std::invalid_argument(std::string(source) +
-                                ": no links configured: add a [[link]] or give --link NAME=DEVICE:PROTOCOL");
+    throw std::invalid_argument(source_prefix(source) +
+                                "no links configured: add a [[link]] or give --link NAME=DEVICE:PROTOCOL");
   }
   validate_links(config, source);
 }
 
 void validate_links(const Config& config, std::string_view source) {
-  const std::string where(source);
   std::set<std::string, std::less<>> names;
   for (std::size_t i = 0; i < config.links.size(); ++i) {
     const LinkConfig& link = config.links[i];
-    const std::string which = where + ": link[" + std::to_string(i) + "] ('" + link.name + "')";
+    const std::string which = source_prefix(source) + "link[" + std::to_string(i) + "] ('" + link.name + "')";
     // Names become store link names, and XBee radios get "<name>/<address>": keep them plain.
     const bool plain = !link.name.empty() && std::all_of(link.name.begin(), link.name.end(), [](char c) {
       return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';

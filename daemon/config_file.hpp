@@ -41,6 +41,7 @@ void apply_link_spec(Config& config, const LinkSpec& spec);
 
 // The whole configuration, once assembled from the file and the command line: it names at least one link, and
 // validate_links() (which parse_config() runs) finds nothing wrong with its links: names, backoff, feedback.
+// `source` (the file, or empty when there is none) starts the message.
 void validate(const Config& config, std::string_view source);
 void validate_links(const Config& config, std::string_view source);
 

@@ -154,6 +154,7 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     auto link = std::make_unique<Link>();
     Link& l = *link;
     l.config = link_config;
+    l.store_link = static_cast<std::int64_t>(links_.size()) + 1;  // distinct until a recording assigns its own
     l.port = std::make_unique<SerialLink>(
         io_, link_config,
         SerialLink::Handlers{
@@ -215,16 +216,23 @@ void Daemon::open_recording(const fs::path& path, const std::string& continues) 
     r->store.append_event(
         r->session, {.mono_ns = mono_now_ns(), .wall_ns = wall, .kind = "note", .detail = "continues " + continues});
   }
-  for (auto& link : links_) {
+  std::vector<std::int64_t> ids;
+  std::vector<std::unique_ptr<pipeline::LinkRecorder>> recorders;
+  for (const auto& link : links_) {
     const LinkConfig& c = link->config;
-    link->store_link = r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
-                                         fmt::format("{} @ {} baud", describe(c.device), c.baud));
-    link->retire_decoder();
-    link->recorder = std::make_unique<pipeline::LinkRecorder>(r->store, r->session, link->store_link, c.name, c.format,
-                                                              c.calibration);
+    ids.push_back(r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
+                                    fmt::format("{} @ {} baud", describe(c.device), c.baud)));
+    recorders.push_back(
+        std::make_unique<pipeline::LinkRecorder>(r->store, r->session, ids.back(), c.name, c.format, c.calibration));
   }
   r->run = r->store.begin_run(r->session,
                               {.kind = "live", .params_json = nlohmann::json(params_).dump(), .created_wall_ns = wall});
+  // Nothing below throws: every link switches to the new file, or (above) none does.
+  for (std::size_t i = 0; i < links_.size(); ++i) {
+    links_[i]->retire_decoder();
+    links_[i]->store_link = ids[i];
+    links_[i]->recorder = std::move(recorders[i]);
+  }
   // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
   estimation_ = std::make_unique<pipeline::EstimationStage>(params_);
   spdlog::info("recording session {} into {}{}", r->session, path.string(),
@@ -258,14 +266,16 @@ void Daemon::close_recording() {
 }
 
 void Daemon::use_decoders() {
-  for (auto& link : links_) {
-    if (link->decoder) continue;
-    link->retire_decoder();
-    // Each XBee radio keeps a link id of its own, so no estimator ever mixes two vehicles' samples.
-    link->decoder = std::make_unique<pipeline::LinkDecoder>(
-        link->config.format, static_cast<std::uint32_t>(link->store_link), link->config.calibration,
-        [ids = std::map<std::uint64_t, std::uint32_t>()](std::uint64_t source64) mutable {
-          return ids.try_emplace(source64, 0x80000000u + static_cast<std::uint32_t>(ids.size())).first->second;
+  for (std::uint32_t i = 0; i < links_.size(); ++i) {
+    Link& link = *links_[i];
+    if (link.decoder) continue;
+    link.retire_decoder();
+    // Each XBee radio gets a link id of its own, above any store link's, so no estimator mixes two vehicles.
+    link.decoder = std::make_unique<pipeline::LinkDecoder>(
+        link.config.format, static_cast<std::uint32_t>(link.store_link), link.config.calibration,
+        [radios = std::map<std::uint64_t, std::uint32_t>(), i](std::uint64_t source64) mutable {
+          const auto id = 0x80000000u | (i << 16) | static_cast<std::uint32_t>(radios.size());
+          return radios.try_emplace(source64, id).first->second;
         });
   }
 }

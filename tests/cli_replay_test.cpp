@@ -2,6 +2,9 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <Eigen/Geometry>
@@ -127,6 +130,63 @@ TEST_F(ReplayCommand, XbeeAndMavlinkSessionsReplayToWhatTheirStoredSamplesGive) 
     expect_same_estimates(stored_estimates(store, paced), want);
     EXPECT_EQ(store.runs(session).front().info.kind, "replay");
   }
+}
+
+// Starts the program as a child of its own, with stdout and stderr into `log`; returns its process id.
+pid_t spawn_imubridge(const std::vector<std::string>& args, const fs::path& log) {
+  std::vector<std::string> words{IMUBRIDGE_BIN};
+  words.insert(words.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& word : words) argv.push_back(word.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t files;
+  posix_spawn_file_actions_init(&files);
+  posix_spawn_file_actions_addopen(&files, STDOUT_FILENO, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&files, STDOUT_FILENO, STDERR_FILENO);
+  pid_t pid = -1;
+  if (posix_spawn(&pid, IMUBRIDGE_BIN, &files, nullptr, argv.data(), environ) != 0) pid = -1;
+  posix_spawn_file_actions_destroy(&files);
+  return pid;
+}
+
+// The real thing: `imubridge run` records a simulated vehicle streaming on a pty, estimating live; replaying its
+// session with the live run's parameters must give that run's estimates exactly.
+TEST_F(ReplayCommand, ReplayingADaemonSessionReproducesItsLiveRun) {
+  const auto [params_path, params] = paper_params_file();
+  const fs::path tty = dir_ / "ttyVehicle";
+  CommandResult vehicle;
+  std::thread sim([&] {
+    vehicle = run_imubridge("sim --scenario paper --seed 2 --duration 2 --protocol xbee --pty " + tty.string());
+  });
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!fs::is_symlink(tty) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  const pid_t daemon = spawn_imubridge({"run", "--db", db_.string(), "--link", "imu0=" + tty.string() + ":xbee",
+                                        "--params", params_path.string(), "--log-level", "warn"},
+                                       dir_ / "run.log");
+  sim.join();
+  ASSERT_GT(daemon, 0);
+  ASSERT_EQ(vehicle.exit_code, 0) << vehicle.err;
+  ::kill(daemon, SIGTERM);  // the vehicle is done; the daemon ends its session cleanly
+  int status = 0;
+  ASSERT_EQ(::waitpid(daemon, &status, 0), daemon);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << slurp(dir_ / "run.log");
+
+  std::int64_t session = 0, live = 0;
+  {
+    const store::Store store(db_, {.read_only = true});
+    session = store.sessions().at(0).id;
+    live = store.runs(session).at(0).id;
+    ASSERT_EQ(store.runs(session).at(0).info.kind, "live");
+  }
+  const std::int64_t replayed = run_for_id(replay_args(session));  // default: the live run's parameters
+  const store::Store store(db_, {.read_only = true});
+  const auto want = stored_estimates(store, live);
+  ASSERT_FALSE(want.empty());
+  EXPECT_GT(want.begin()->second.size(), 100u);
+  EXPECT_TRUE(std::isfinite(want.begin()->second.back().vx));
+  expect_same_estimates(stored_estimates(store, replayed), want);
 }
 
 TEST_F(ReplayCommand, FromToReplaysTheChunksReceivedInTheWindow) {

@@ -3,10 +3,17 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "pipeline/estimation_stage.hpp"
 #include "tests/cli_run_harness.hpp"
 
 namespace imubridge::test {
 namespace {
+
+std::size_t total_size(const std::vector<std::vector<std::uint8_t>>& pieces) {
+  std::size_t n = 0;
+  for (const auto& p : pieces) n += p.size();
+  return n;
+}
 
 class RunStorageTest : public ::testing::Test {
  protected:
@@ -18,19 +25,19 @@ class RunStorageTest : public ::testing::Test {
                                         dir_ / "stderr", options);
     ASSERT_TRUE(daemon_->wait_for_log("link 'imu': reading")) << daemon_->log();
   }
-  // Whether the daemon gets to `count` samples processed, by the counters it logs on SIGUSR1. Asks at most 100
-  // times: the log is a file too, and must stay far below the write-failure test's file size limit.
-  bool processes(std::uint64_t count) {
+  // The link's counters as the daemon logs them on SIGUSR1, once it has read `bytes` bytes; null if it does not.
+  // Asks at most 100 times: the log is a file too, and must stay far below the write-failure test's size limit.
+  nlohmann::json counters_after_reading(std::size_t bytes) {
     for (int asked = 1; asked <= 100; ++asked) {
       daemon_->signal(SIGUSR1);
-      if (!eventually([&] { return count_of(daemon_->log(), "stats {") >= asked; })) return false;
+      if (!eventually([&] { return count_of(daemon_->log(), "stats {") >= asked; })) break;
       const std::string log = daemon_->log();
       const auto at = log.rfind("stats {") + 6;
-      const auto stats = nlohmann::json::parse(log.substr(at, log.find('\n', at) - at));
-      if (stats["links"]["imu"]["samples"].get<std::uint64_t>() >= count) return true;
+      const auto link = nlohmann::json::parse(log.substr(at, log.find('\n', at) - at))["links"]["imu"];
+      if (link["bytes_read"] == bytes) return link;
       std::this_thread::sleep_for(100ms);
     }
-    return false;
+    return nullptr;
   }
   void stop() {
     daemon_->signal(SIGTERM);
@@ -45,8 +52,15 @@ class RunStorageTest : public ::testing::Test {
 
 TEST_F(RunStorageTest, BelowTheFreeSpaceFloorNothingIsWrittenButTheLinksAreServed) {
   start("min_free_mib = 1e9");  // a petabyte: no disk here has that much free
-  write_paced(pty_, simulated_frames(100));
-  EXPECT_TRUE(processes(100)) << daemon_->log();
+  const auto frames = simulated_frames(100);
+  write_paced(pty_, frames);
+  const auto link = counters_after_reading(total_size(frames));
+  ASSERT_FALSE(link.is_null()) << daemon_->log();
+  EXPECT_EQ(link["samples"], frames.size());
+  // Estimated for the outputs all the same: all but the first `delay` samples and the last `delay`, which wait for
+  // the samples that complete their differentiator window.
+  const int delay = pipeline::EstimationStage(estimator::ModelParams{}).delay_samples();
+  EXPECT_EQ(link["estimates"], frames.size() - 2 * delay);
   stop();
   EXPECT_EQ(count_of(daemon_->log(), "not recording: only"), 1) << daemon_->log();
   EXPECT_FALSE(fs::exists(db_));
@@ -56,7 +70,7 @@ TEST_F(RunStorageTest, TheSizeCapRotatesIntoChainedFilesThatKeepEveryByte) {
   const auto frames = simulated_frames(8000);
   start("min_free_mib = 0\nmax_size_mib = 1\ncommit_interval_ms = 50");
   write_paced(pty_, frames);
-  ASSERT_TRUE(processes(frames.size() - 10)) << daemon_->log();  // a few frames may be cut by rotations
+  ASSERT_FALSE(counters_after_reading(total_size(frames)).is_null()) << daemon_->log();
   stop();
   ASSERT_GE(count_of(daemon_->log(), "reached store.max_size_mib"), 1) << daemon_->log();
 
@@ -100,9 +114,15 @@ TEST_F(RunStorageTest, AFailedWriteStopsRecordingCleanlyAndTheDaemonGoesOn) {
   start("min_free_mib = 0", {.env = {}, .file_size_limit = 256 * 1024});
   const auto frames = simulated_frames(4000);
   write_paced(pty_, frames);
-  ASSERT_TRUE(processes(frames.size())) << daemon_->log();
+  const auto link = counters_after_reading(total_size(frames));
+  ASSERT_FALSE(link.is_null()) << daemon_->log();
   stop();
   EXPECT_EQ(count_of(daemon_->log(), "recording stopped: "), 1) << daemon_->log();
+  // Decoding goes on for the outputs. Stopping the recorder's decoder may cut the frame it was in the middle of:
+  // then its bytes are counted as discarded, and nothing else is lost.
+  const std::uint64_t samples = link["samples"], discarded = link["decoders"]["imubridge"]["bytes_discarded"];
+  EXPECT_GE(samples, frames.size() - 1);
+  EXPECT_EQ(samples * frames[0].size() + discarded, total_size(frames));
   EXPECT_EQ(integrity_check(db_), "ok");
   EXPECT_FALSE(committed_samples(db_).empty()) << "what was committed before the failure is kept";
 }

@@ -24,7 +24,7 @@ const RegisterCommand kListPorts([](CLI::App& app) -> CommandRunner {
     }
     if (ports.empty()) std::fprintf(stderr, "no serial ports found\n");
     for (const auto& port : ports) {
-      std::printf("%s  %s\n", port.path.c_str(), port.description.c_str());
+      std::printf("%s  %s (%s)\n", port.path.c_str(), port.description.c_str(), port.transport.c_str());
       if (port.usb_vid) {
         std::printf("    usb = { vid = 0x%s, pid = 0x%s%s%s }  # %s %s\n", protocol::hex(*port.usb_vid, 2).c_str(),
                     protocol::hex(*port.usb_pid, 2).c_str(), port.usb_serial.empty() ? "" : ", serial = \"",

@@ -47,7 +47,7 @@ const RegisterCommand kRun([](CLI::App& app) -> CommandRunner {
     if (!o->db.empty()) config.store.path = o->db;
     if (!o->params.empty()) config.params = o->params;
     if (!o->log_level.empty()) config.log_level = o->log_level;
-    daemon::validate(config, file ? file->string() : "imubridge run");
+    daemon::validate(config, file ? file->string() : "");
     daemon::configure_logging(config);
     daemon::Daemon daemon(std::move(config), file);
     return daemon.run();
