@@ -104,6 +104,37 @@ TEST_F(RunTest, EveryFrameIsStoredAndEstimatedAndCounted) {
   EXPECT_EQ(totals.at("connected"), 1);
 }
 
+// The programs a user runs, end to end: `imubridge sim --pty` streams a flight, `imubridge run` records it. Every
+// byte the simulator wrote is stored, the last ones too (the simulator waits for its reader before closing).
+TEST_F(RunTest, TheSimulatorsStreamOverAPtyIsStoredWhole) {
+  const std::string flight = "sim --scenario paper --seed 4 --duration 1 --rate 500";
+  const auto file = run_imubridge(flight + " --file " + (dir_ / "flight.bin").string());  // the same bytes, as a file
+  ASSERT_EQ(file.exit_code, 0) << file.err;
+  const std::string sent = slurp(dir_ / "flight.bin");
+  start();  // the device appears when the simulator starts: the daemon waits for it
+  ASSERT_TRUE(daemon_->wait_for_log("cannot open")) << daemon_->log();
+  const auto vehicle = run_imubridge(flight + " --speed 2 --pty " + tty_.string());
+  ASSERT_EQ(vehicle.exit_code, 0) << vehicle.err;
+  EXPECT_EQ(vehicle.err.find("nobody was reading"), std::string::npos) << vehicle.err;
+  ASSERT_TRUE(wait_for_samples(db_, 500)) << daemon_->log();
+  stop();
+
+  const store::Store store(db_, {.read_only = true});
+  const std::int64_t session = store.sessions().at(0).id;
+  std::string received;
+  store.for_each_chunk(session, std::nullopt,
+                       [&](const store::Chunk& c) { received.append(c.bytes.begin(), c.bytes.end()); });
+  EXPECT_EQ(received.size(), sent.size());
+  EXPECT_EQ(received, sent);
+  std::vector<std::uint64_t> seqs;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { seqs.push_back(s.seq); });
+  ASSERT_EQ(seqs.size(), 500u);
+  for (std::size_t i = 0; i < seqs.size(); ++i) ASSERT_EQ(seqs[i], i);
+  std::size_t estimates = 0;
+  store.for_each_estimate(store.runs(session).at(0).id, [&](const store::Estimate&) { ++estimates; });
+  EXPECT_EQ(estimates, seqs.size() - 2 * pipeline::EstimationStage(estimator::ModelParams{}).delay_samples());
+}
+
 TEST_F(RunTest, GarbageAndBitFlipsLoseOnlyTheDamagedFramesAndCountThemExactly) {
   constexpr std::size_t kFrames = 400;
   auto frames = simulated_frames(kFrames);

@@ -192,10 +192,11 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
   encoder.flush(bytes);
   deliver(t);
   if (file.is_open() && !file.flush()) throw std::runtime_error("write error on " + o.file);
+  const std::size_t unread = pty ? pty->drain() : 0;  // closing the pty would discard what its reader has not read
   std::fprintf(stderr, "sent %llu bytes (%.1f s of flight)", static_cast<unsigned long long>(written), t);
-  if (pty && pty->dropped_bytes() > 0) {
-    std::fprintf(stderr, "; %llu bytes dropped because nobody was reading",
-                 static_cast<unsigned long long>(pty->dropped_bytes()));
+  if (pty && pty->dropped_bytes() + unread > 0) {
+    std::fprintf(stderr, "; nobody was reading: %llu bytes dropped, at least %llu left unread",
+                 static_cast<unsigned long long>(pty->dropped_bytes()), static_cast<unsigned long long>(unread));
   }
   std::fprintf(stderr, "\n");
   return 0;
