@@ -1,8 +1,5 @@
 // `imubridge replay`: a recorded session through the live pipeline again, into a new run beside the live one, or
 // its recorded bytes re-emitted on a pseudo-terminal at their recorded pace. docs/replay.md.
-#include <fcntl.h>
-#include <sys/ioctl.h>
-#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -15,7 +12,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
@@ -159,24 +155,6 @@ int replay_into_run(const ReplayCommandOptions& o) {
   return 0;
 }
 
-// Closing a pty discards what its reader has not read yet: give the reader time to take the recording's tail,
-// as long as it keeps reading. Returns the bytes it left unread in the slave's queue (the pty may hold more).
-int wait_for_reader(const PtyPair& pty) {
-  const int fd = ::open(pty.slave_name().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);  // to look, never to read
-  if (fd < 0) return 0;
-  constexpr auto kPatience = std::chrono::milliseconds(500);
-  int pending = 0, before = -1;
-  auto deadline = Clock::now() + kPatience;
-  std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the last write reaches the slave's queue
-  while (::ioctl(fd, FIONREAD, &pending) == 0 && pending > 0 && Clock::now() < deadline) {
-    if (pending != before) deadline = Clock::now() + kPatience;  // still reading
-    before = pending;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ::close(fd);
-  return pending;
-}
-
 int replay_to_pty(const ReplayCommandOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const store::Session session = replay::find_session(store, o.session);
@@ -204,7 +182,7 @@ int replay_to_pty(const ReplayCommandOptions& o) {
   } catch (const Stopped&) {
   }
   progress.clear();
-  const auto unread = static_cast<unsigned long long>(wait_for_reader(pty));
+  const auto unread = static_cast<unsigned long long>(pty.drain());  // closing discards what is unread
   std::fprintf(stderr, "sent %llu bytes (%.1f s of the recording)", static_cast<unsigned long long>(bytes),
                last_s - first_s);
   if (pty.dropped_bytes() + unread > 0) {
