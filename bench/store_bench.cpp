@@ -1,6 +1,8 @@
 // Sample ingest: through the Store (WAL, batched commits, foreign-key checks) against the floor SQLite allows, a bare
 // loop of the same INSERT with one prepared statement in one transaction, into the same table of the same file.
 // Target: Store >= 500,000 samples/s and >= 0.7 of the bare loop.
+// Estimates (what a replay writes): through the Store, and bare INSERTs of 1 to 128 rows per statement, the
+// measurement behind Store::kEstimateBatchRows.
 #include <benchmark/benchmark.h>
 #include <sqlite3.h>
 #include <stdlib.h>
@@ -120,6 +122,87 @@ void BM_BareInsertLoop(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kSamplesPerIteration);
 }
 BENCHMARK(BM_BareInsertLoop)->Unit(benchmark::kMillisecond);
+
+// One session, link and run, as the Store creates them; returns the link id (the run's is 1).
+std::int64_t prepare_run(const fs::path& path) {
+  Store store(path);
+  const std::int64_t session = store.begin_session({.kind = "bench"});
+  const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+  store.begin_run(session, {.kind = "bench"});
+  return link;
+}
+
+std::vector<Estimate> estimates(std::int64_t link) {
+  std::vector<Estimate> estimates(kSamplesPerIteration);
+  for (int i = 0; i < kSamplesPerIteration; ++i) {
+    const double x = 0.001 * i;
+    estimates[static_cast<std::size_t>(i)] = {.link_id = link,
+                                              .seq = static_cast<std::uint64_t>(i),
+                                              .t_s = 0.005 * i,
+                                              .fx = 0.3 + x,
+                                              .fy = -0.2 - x,
+                                              .vx = 1.5 * x,
+                                              .vy = -0.5 * x,
+                                              .var_vx = 0.01 + x,
+                                              .var_vy = 0.02 + x};
+  }
+  return estimates;
+}
+
+void BM_StoreEstimates(benchmark::State& state) {
+  ScratchDir dir;
+  const auto rows = estimates(prepare_run(dir.database()));
+  Store store(dir.database());
+  for (auto _ : state) {
+    for (const auto& e : rows) {
+      store.append_estimate(1, e);
+      store.commit_if_due(std::chrono::steady_clock::now());
+    }
+  }
+  store.commit();
+  state.SetItemsProcessed(state.iterations() * kSamplesPerIteration);
+}
+BENCHMARK(BM_StoreEstimates)->Unit(benchmark::kMillisecond);
+
+// INSERT ... VALUES (...), (...), ... with state.range(0) rows per statement, foreign keys on as in the Store.
+void BM_BareEstimateInsert(benchmark::State& state) {
+  const auto rows_per_statement = static_cast<std::size_t>(state.range(0));
+  ScratchDir dir;
+  const auto rows = estimates(prepare_run(dir.database()));
+  std::string sql = "INSERT INTO estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy) VALUES ";
+  for (std::size_t r = 0; r < rows_per_statement; ++r)
+    sql += r == 0 ? "(?,?,?,?,?,?,?,?,?,?)" : ",(?,?,?,?,?,?,?,?,?,?)";
+  sqlite3* db = nullptr;
+  sqlite3_stmt* insert = nullptr;
+  if (sqlite3_open(dir.database().c_str(), &db) != SQLITE_OK ||
+      sqlite3_exec(db, "PRAGMA foreign_keys = ON", nullptr, nullptr, nullptr) != SQLITE_OK ||
+      sqlite3_prepare_v2(db, sql.c_str(), -1, &insert, nullptr) != SQLITE_OK) {
+    state.SkipWithError(sqlite3_errmsg(db));
+    sqlite3_close(db);
+    return;
+  }
+  for (auto _ : state) {
+    sqlite3_exec(db, "BEGIN", nullptr, nullptr, nullptr);
+    for (std::size_t first = 0; first + rows_per_statement <= rows.size(); first += rows_per_statement) {
+      int column = 1;
+      for (std::size_t i = first; i < first + rows_per_statement; ++i) {
+        const Estimate& e = rows[i];
+        sqlite3_bind_int64(insert, column++, 1);
+        sqlite3_bind_int64(insert, column++, e.link_id);
+        sqlite3_bind_int64(insert, column++, static_cast<sqlite3_int64>(e.seq));
+        for (double v : {e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy}) sqlite3_bind_double(insert, column++, v);
+      }
+      if (sqlite3_step(insert) != SQLITE_DONE) state.SkipWithError(sqlite3_errmsg(db));
+      sqlite3_reset(insert);
+    }
+    if (sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) state.SkipWithError(sqlite3_errmsg(db));
+  }
+  sqlite3_finalize(insert);
+  sqlite3_close(db);
+  const auto rows_written = rows.size() / rows_per_statement * rows_per_statement;
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(rows_written));
+}
+BENCHMARK(BM_BareEstimateInsert)->Arg(1)->Arg(8)->Arg(16)->Arg(32)->Arg(64)->Arg(128)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace imubridge::store

@@ -2,7 +2,9 @@
 
 #include <sqlite3.h>
 
+#include <cmath>
 #include <cstdio>
+#include <limits>
 #include <string>
 
 #include "store/schema.hpp"
@@ -67,6 +69,21 @@ std::optional<std::int64_t> column_optional_int(const Statement& row, int column
 std::int64_t seq_to_column(std::uint64_t seq) { return static_cast<std::int64_t>(seq); }
 std::uint64_t seq_from_column(std::int64_t value) { return static_cast<std::uint64_t>(value); }
 
+constexpr std::size_t kEstimateColumns = 10;  // run_id, link_id, seq and 7 values
+
+void bind_estimate(Statement& statement, int first, std::int64_t run, const Estimate& e) {
+  statement.bind_int(first, run).bind_int(first + 1, e.link_id).bind_int(first + 2, seq_to_column(e.seq));
+  bind_reals(statement, first + 3, std::array{e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy});
+}
+
+// An estimate as reading it back from its row gives it: every NaN is stored as NULL and reads as the quiet NaN.
+Estimate as_stored(Estimate e) {
+  for (double* v : {&e.t_s, &e.fx, &e.fy, &e.vx, &e.vy, &e.var_vx, &e.var_vy}) {
+    if (std::isnan(*v)) *v = std::numeric_limits<double>::quiet_NaN();
+  }
+  return e;
+}
+
 Statement& bind_optional_int(Statement& statement, int index, std::optional<std::int64_t> value) {
   return value ? statement.bind_int(index, *value) : statement.bind_null(index);
 }
@@ -98,13 +115,17 @@ Store::~Store() {
   }
 }
 
-void Store::write(Statement& write, std::string_view what) {
+void Store::execute(Statement& statement, std::string_view what) {
   try {
     if (!db_.in_transaction()) begin_.step();
-    write.step();
+    statement.step();
   } catch (const StoreError& e) {
     fail(e, what);
   }
+}
+
+void Store::write(Statement& write, std::string_view what) {
+  execute(write, what);
   ++pending_rows_;
   if (pending_rows_ >= options_.max_batch_rows) commit();
 }
@@ -121,6 +142,7 @@ void Store::fail(const StoreError& error, std::string_view what) {
   // A constraint failure undoes only the offending statement: the batch is still good and stays open.
   if (error.sqlite_code() == SQLITE_CONSTRAINT && db_.in_transaction()) throw StoreError(message, error.sqlite_code());
   db_.rollback();
+  pending_estimates_.clear();  // they were part of the batch
   if (pending_rows_ > 0) {
     message += "; rolled back the " + std::to_string(pending_rows_) +
                " rows appended since the last commit, earlier data is intact";
@@ -130,7 +152,8 @@ void Store::fail(const StoreError& error, std::string_view what) {
 }
 
 bool Store::commit_if_due(std::chrono::steady_clock::time_point now) {
-  if (!db_.in_transaction()) return false;  // not pending_rows_: a rejected first row leaves an empty batch open
+  // Not pending_rows_: a rejected first row leaves an empty batch open.
+  if (!db_.in_transaction() && pending_estimates_.empty()) return false;
   if (last_due_commit_ && now - *last_due_commit_ < options_.commit_interval) return false;
   commit();
   last_due_commit_ = now;
@@ -138,6 +161,7 @@ bool Store::commit_if_due(std::chrono::steady_clock::time_point now) {
 }
 
 void Store::commit() {
+  flush_estimates();
   if (!db_.in_transaction()) return;
   try {
     commit_.step();
@@ -227,10 +251,59 @@ std::int64_t Store::begin_run(std::int64_t session, const RunInfo& info) {
   return insert_committed(insert_run_, "starting a run");
 }
 
+std::string Store::insert_estimates_sql(std::size_t rows) {
+  std::string row = "(?";
+  for (std::size_t i = 1; i < kEstimateColumns; ++i) row += ", ?";
+  row += ")";
+  std::string sql = "INSERT INTO estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy) VALUES " + row;
+  for (std::size_t i = 1; i < rows; ++i) sql += ", " + row;
+  return sql;
+}
+
 void Store::append_estimate(std::int64_t run, const Estimate& e) {
-  insert_estimate_.bind_int(1, run).bind_int(2, e.link_id).bind_int(3, seq_to_column(e.seq));
-  bind_reals(insert_estimate_, 4, std::array{e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy});
-  write(insert_estimate_, "appending an estimate");
+  if (!accepted_run_links_.contains({run, e.link_id})) {
+    flush_estimates();  // the rows appended before it go first
+    bind_estimate(insert_estimate_, 1, run, e);
+    write(insert_estimate_, "appending an estimate");
+    accepted_run_links_.emplace(run, e.link_id);  // nothing deletes runs or links: later rows will be accepted too
+    return;
+  }
+  pending_estimates_.push_back({run, e});
+  ++pending_rows_;
+  if (pending_estimates_.size() == kEstimateBatchRows) flush_estimates();
+  if (pending_rows_ >= options_.max_batch_rows) commit();
+}
+
+void Store::flush_estimates() {
+  std::optional<StoreError> refused;  // the first row the schema refused: thrown once the others are in
+  std::size_t written = 0;
+  // Any failure but a refused row rolls the batch back, which drops these rows too (fail()) and ends the loops.
+  for (; pending_estimates_.size() - written >= kEstimateBatchRows; written += kEstimateBatchRows) {
+    for (std::size_t i = 0; i < kEstimateBatchRows; ++i) {
+      const auto& [run, e] = pending_estimates_[written + i];
+      bind_estimate(insert_estimates_, static_cast<int>(1 + i * kEstimateColumns), run, e);
+    }
+    try {
+      execute(insert_estimates_, "appending estimates");
+    } catch (const StoreError& error) {
+      // Only a run or link deleted by another program gets here; row by row below, only its rows are refused.
+      if (error.sqlite_code() != SQLITE_CONSTRAINT) throw;
+      break;
+    }
+  }
+  for (; written < pending_estimates_.size(); ++written) {
+    const auto& [run, e] = pending_estimates_[written];
+    bind_estimate(insert_estimate_, 1, run, e);
+    try {
+      execute(insert_estimate_, "appending an estimate");
+    } catch (const StoreError& error) {
+      if (error.sqlite_code() != SQLITE_CONSTRAINT) throw;
+      --pending_rows_;
+      if (!refused) refused = error;
+    }
+  }
+  pending_estimates_.clear();
+  if (refused) throw *refused;
 }
 
 void Store::append_reference(std::int64_t session, const ReferenceRow& row) {
@@ -381,6 +454,9 @@ void Store::for_each_estimate(std::int64_t run, const std::function<void(const E
            .vy = vy,
            .var_vx = var_vx,
            .var_vy = var_vy});
+  }
+  for (const auto& [pending_run, e] : pending_estimates_) {  // appended after every row above
+    if (pending_run == run) visit(as_stored(e));
   }
 }
 

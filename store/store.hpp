@@ -9,8 +9,11 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <set>
 #include <span>
+#include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "protocol/sample.hpp"
@@ -53,6 +56,9 @@ class Store {
   void append_sample(std::int64_t session, const protocol::Sample& sample);  // sample.link_id names the link
   void append_event(std::int64_t session, const Event& event);
   std::int64_t begin_run(std::int64_t session, const RunInfo& info);
+  // Estimates come at the sample rate, so they are written kEstimateBatchRows to a statement: the first row of each
+  // (run, link) is written at once, so an unknown run or link fails here; the others wait in memory until a batch is
+  // full or anything commits. They count as appended (pending_rows) and readers see them.
   void append_estimate(std::int64_t run, const Estimate& estimate);
   void append_reference(std::int64_t session, const ReferenceRow& row);
 
@@ -62,6 +68,10 @@ class Store {
   void commit();
   // Rows appended since the last commit.
   std::size_t pending_rows() const noexcept { return pending_rows_; }
+
+  // Rows per multi-row estimate INSERT: a statement's fixed cost (opening and closing its cursors, ending it) shared
+  // by this many rows halves the cost per row; more rows gain little (store_bench, docs/performance.md).
+  static constexpr std::size_t kEstimateBatchRows = 32;
 
   // Reading, each in the order the rows were appended. A read-write Store also sees its own uncommitted rows.
   std::vector<Session> sessions() const;
@@ -77,8 +87,17 @@ class Store {
   void for_each_reference(std::int64_t session, const std::function<void(const ReferenceRow&)>& visit) const;
 
  private:
-  // Runs `write` (bound, not yet stepped) inside the open batch; `what` names it in error messages.
+  struct PendingEstimate {
+    std::int64_t run;
+    Estimate estimate;
+  };
+
+  // Steps `statement` (bound, not yet stepped) inside the open batch; `what` names it in error messages.
+  void execute(Statement& statement, std::string_view what);
+  // execute() for one appended row, counted in the batch.
   void write(Statement& write, std::string_view what);
+  // Writes the estimates waiting in memory, in the order they were appended.
+  void flush_estimates();
   // Inserts a row others will refer to, commits, and returns its id.
   std::int64_t insert_committed(Statement& insert, std::string_view what);
   [[noreturn]] void fail(const StoreError& error, std::string_view what);
@@ -87,6 +106,8 @@ class Store {
   Options options_;
   std::size_t pending_rows_ = 0;
   std::optional<std::chrono::steady_clock::time_point> last_due_commit_;
+  std::vector<PendingEstimate> pending_estimates_;
+  std::set<std::pair<std::int64_t, std::int64_t>> accepted_run_links_;  // (run, link) pairs the schema took a row of
 
   Statement begin_{db_, "BEGIN IMMEDIATE"};
   Statement commit_{db_, "COMMIT"};
@@ -108,9 +129,9 @@ class Store {
   Statement insert_run_{db_,
                         "INSERT INTO runs (session_id, kind, params, created_wall_ns, software_version) "
                         "VALUES (?1, ?2, ?3, ?4, ?5)"};
-  Statement insert_estimate_{db_,
-                             "INSERT INTO estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy) "
-                             "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)"};
+  static std::string insert_estimates_sql(std::size_t rows);
+  Statement insert_estimate_{db_, insert_estimates_sql(1)};
+  Statement insert_estimates_{db_, insert_estimates_sql(kEstimateBatchRows)};
   Statement insert_reference_{db_,
                               "INSERT INTO reference (session_id, t_ns, px, py, pz, qw, qx, qy, qz, vx, vy, vz) "
                               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)"};

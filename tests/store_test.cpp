@@ -14,6 +14,7 @@
 #include <iterator>
 #include <limits>
 #include <list>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -373,6 +374,110 @@ TEST_F(StoreTest, RejectedRowThrowsAndLeavesTheBatchAlone) {
   EXPECT_EQ(samples[1].seq, 2u);
 }
 
+// Estimates reach SQLite kEstimateBatchRows to a statement (store.hpp). Whatever the batching, they keep their append
+// order across runs and links, count as pending, are seen by their own Store at once and by everyone once committed.
+std::vector<Estimate> estimates_of(const Store& store, std::int64_t run) {
+  std::vector<Estimate> estimates;
+  store.for_each_estimate(run, [&](const Estimate& e) { estimates.push_back(e); });
+  return estimates;
+}
+
+void expect_same_estimates(const std::vector<Estimate>& expected, const std::vector<Estimate>& actual) {
+  ASSERT_EQ(expected.size(), actual.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(expected[i].link_id, actual[i].link_id);
+    EXPECT_EQ(expected[i].seq, actual[i].seq);
+    expect_same_bits(values(expected[i]), values(actual[i]));
+  }
+}
+
+// seq of every estimate in id order, as another program reads them.
+std::string committed_estimate_seqs(const fs::path& path) {
+  return query(path, "SELECT coalesce(group_concat(seq), '') FROM (SELECT seq FROM estimates ORDER BY id)");
+}
+
+TEST_F(StoreTest, BatchedEstimatesKeepAppendOrderAndAreSeenAtOnce) {
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const std::int64_t links[] = {store.add_link(session, "imu0", "imubridge", ""),
+                                store.add_link(session, "imu1", "imubridge", ""),
+                                store.add_link(session, "imu2", "imubridge", "")};
+  const std::int64_t runs[] = {store.begin_run(session, {.kind = "live"}),
+                               store.begin_run(session, {.kind = "replay"})};
+  const std::size_t count = 2 * Store::kEstimateBatchRows + 5;
+  std::map<std::int64_t, std::vector<Estimate>> appended;
+  std::string seqs;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double x = static_cast<double>(i);
+    const Estimate e{.link_id = links[i + 3 < count ? i % 2 : 2],  // a new link's first row after waiting ones
+                     .seq = i,
+                     .t_s = 0.005 * x,
+                     .fx = i == 7 ? -0.0 : 0.1 * x,
+                     .fy = i % 5 == 0 ? kNaN : -x,
+                     .vx = -1.0 / (x + 1),
+                     .vy = kDenormal,
+                     .var_vx = kInf,
+                     .var_vy = 1e300};
+    const std::int64_t run = runs[i % 3 == 0 ? 1 : 0];
+    store.append_estimate(run, e);
+    appended[run].push_back(e);
+    seqs += (seqs.empty() ? "" : ",") + std::to_string(i);
+  }
+  EXPECT_EQ(store.pending_rows(), count);
+  EXPECT_EQ(committed_estimate_seqs(path_), "") << "nothing committed yet";
+  for (const std::int64_t run : runs) expect_same_estimates(appended[run], estimates_of(store, run));
+
+  EXPECT_TRUE(store.commit_if_due(std::chrono::steady_clock::now()));
+  EXPECT_EQ(store.pending_rows(), 0u);
+  EXPECT_EQ(committed_estimate_seqs(path_), seqs);
+  const Store reader(path_, {.read_only = true});
+  for (const std::int64_t run : runs) expect_same_estimates(appended[run], estimates_of(reader, run));
+}
+
+TEST_F(StoreTest, EstimateOfAnUnknownLinkFailsAtOnceAndTheWaitingOnesStay) {
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+  const std::int64_t run = store.begin_run(session, {.kind = "live"});
+  for (std::uint64_t seq = 0; seq < 5; ++seq) store.append_estimate(run, {.link_id = link, .seq = seq});
+
+  EXPECT_EQ(error_of([&] { store.append_estimate(run, {.link_id = link + 100, .seq = 5}); }),
+            path_.string() + ": FOREIGN KEY constraint failed (appending an estimate)");
+  store.append_estimate(run, {.link_id = link, .seq = 6});
+  EXPECT_EQ(store.pending_rows(), 6u);
+  store.commit();
+  EXPECT_EQ(committed_estimate_seqs(path_), "0,1,2,3,4,6");
+}
+
+TEST_F(StoreTest, EstimatesOfARunDeletedBehindTheStoresBackAreRefusedAlone) {
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+  const std::int64_t kept = store.begin_run(session, {.kind = "live"});
+  const std::int64_t deleted = store.begin_run(session, {.kind = "replay"});
+  store.append_estimate(kept, {.link_id = link, .seq = 0});  // both runs' first rows are accepted
+  store.append_estimate(deleted, {.link_id = link, .seq = 0});
+  store.commit();
+  execute(path_, ("DELETE FROM estimates WHERE run_id = " + std::to_string(deleted) +
+                  "; DELETE FROM runs WHERE id = " + std::to_string(deleted))
+                     .c_str());
+
+  std::vector<std::string> errors;
+  for (std::uint64_t seq = 1; seq <= Store::kEstimateBatchRows; ++seq) {  // the last one fills the batch
+    errors.push_back(
+        error_of([&] { store.append_estimate(seq % 4 == 0 ? deleted : kept, {.link_id = link, .seq = seq}); }));
+  }
+  EXPECT_EQ(std::count(errors.begin(), errors.end(), ""), Store::kEstimateBatchRows - 1);
+  EXPECT_EQ(errors.back(), path_.string() + ": FOREIGN KEY constraint failed (appending an estimate)");
+  const std::size_t kept_rows = Store::kEstimateBatchRows - Store::kEstimateBatchRows / 4;
+  EXPECT_EQ(store.pending_rows(), kept_rows);
+  store.commit();
+  EXPECT_EQ(query(path_, ("SELECT count(*) FROM estimates WHERE run_id = " + std::to_string(kept)).c_str()),
+            std::to_string(1 + kept_rows));
+  EXPECT_EQ(query(path_, "SELECT count(*) FROM estimates"), std::to_string(1 + kept_rows));
+}
+
 TEST_F(StoreTest, MalformedRawCountsAreAnErrorNotACrash) {
   std::int64_t session = 0;
   {
@@ -497,6 +602,28 @@ TEST_F(StoreTest, FullDiskAtCommitLosesOnlyTheBatchAndSaysSo) {
   std::vector<std::uint64_t> seqs;
   for (const auto& s : samples_of(store, store.sessions().at(0).id)) seqs.push_back(s.seq);
   EXPECT_EQ(seqs, (std::vector<std::uint64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 100}));
+}
+
+TEST_F(StoreTest, FullDiskDropsTheWaitingEstimatesWithTheirBatch) {
+  FullDisk disk;
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+  const std::int64_t run = store.begin_run(session, {.kind = "live"});
+  store.append_estimate(run, {.link_id = link, .seq = 0});
+  store.commit();
+  const std::size_t lost = Store::kEstimateBatchRows + 8;  // a batch in SQLite's transaction, 8 in memory
+  for (std::uint64_t seq = 1; seq <= lost; ++seq) store.append_estimate(run, {.link_id = link, .seq = seq});
+
+  FullDisk::full = true;
+  EXPECT_EQ(error_of([&] { store.commit(); }),
+            path_.string() + ": database or disk is full (committing); rolled back the " + std::to_string(lost) +
+                " rows appended since the last commit, earlier data is intact");
+  EXPECT_EQ(store.pending_rows(), 0u);
+  FullDisk::full = false;
+  store.append_estimate(run, {.link_id = link, .seq = 100});
+  store.commit();
+  EXPECT_EQ(committed_estimate_seqs(path_), "0,100");
 }
 
 TEST_F(StoreTest, ReadOnlyStoreNeverChangesTheFile) {
