@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "estimator/constants.hpp"
 #include "estimator/drag_law.hpp"
@@ -33,6 +34,22 @@ void check(const DragVelocityConfig& c) {
 bool finite(const ImuSample& s) { return std::isfinite(s.t) && s.gyro.allFinite() && s.accel.allFinite(); }
 
 }  // namespace
+
+DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base) {
+  const auto& rmse = params.identification.rmse;
+  // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).
+  for (const char* model : {"full", "paper"}) {
+    for (const char* set : {"validation", "fit"}) {
+      const auto x = rmse.find(std::string(model) + ".x." + set);
+      const auto y = rmse.find(std::string(model) + ".y." + set);
+      if (x == rmse.end() || y == rmse.end()) continue;
+      const double rms = std::sqrt(0.5 * (x->second * x->second + y->second * y->second));
+      if (std::isfinite(rms)) base.accel_noise = std::max(base.accel_noise, rms);
+      return base;
+    }
+  }
+  return base;
+}
 
 DragVelocityEstimator::DragVelocityEstimator(const FullModelParams& params, const DragVelocityConfig& config)
     : params_(checked(params)), config_(config), compensator_(params), differentiator_(config.differentiator_window) {

@@ -12,6 +12,7 @@
 #include "estimator/full_model.hpp"
 #include "estimator/imu_series.hpp"
 #include "estimator/lever_arm_compensation.hpp"
+#include "estimator/params.hpp"
 
 namespace imubridge::estimator {
 
@@ -29,6 +30,13 @@ struct DragVelocityConfig {
   double max_specific_force = 16.0 * kGravity;  // m/s^2, per axis
   double max_rate = 35.0;                       // rad/s (2000 deg/s), per axis
 };
+
+// The filter's settings for identified parameters: the measurement noise becomes the identification's horizontal
+// residual RMS (validation window, else fit window) when that is larger than `base`'s. A vibrating airframe's
+// accelerometers read many times their datasheet noise, and a filter that trusts each drag reading as if it were
+// clean swings its velocity with every vibration. Never lower than `base`: a short calm identification window must
+// not make the filter overconfident. Parameters without an identification keep `base`.
+DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base = {});
 
 struct DragVelocityEstimate {
   double t = 0.0;                                       // s: the sample this describes, delay_samples() back

@@ -2,6 +2,9 @@
 
 namespace imubridge::pipeline {
 
+EstimationStage::EstimationStage(const estimator::ModelParams& params)
+    : EstimationStage(params, estimator::config_for(params)) {}
+
 EstimationStage::EstimationStage(const estimator::ModelParams& params, const estimator::DragVelocityConfig& config)
     : params_(params), config_(config) {
   estimator::DragVelocityEstimator check(params_.full, config_);  // bad parameters fail here, not mid-flight

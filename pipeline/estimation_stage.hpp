@@ -16,7 +16,9 @@ namespace imubridge::pipeline {
 
 class EstimationStage {
  public:
-  explicit EstimationStage(const estimator::ModelParams& params, const estimator::DragVelocityConfig& config = {});
+  // The filter's settings follow the identification (estimator::config_for) unless given.
+  explicit EstimationStage(const estimator::ModelParams& params);
+  EstimationStage(const estimator::ModelParams& params, const estimator::DragVelocityConfig& config);
 
   // The estimate this sample completes, if any. The estimator looks delay_samples() back (its differentiator is
   // centred there), so an estimate describes an earlier sample: its seq and time are that sample's.

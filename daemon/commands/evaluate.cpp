@@ -38,7 +38,7 @@ int run(const EvaluateCliOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session =
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = true});
-  const est::VelocityEvaluation e = est::evaluate_velocity(session.series, params.full, window);
+  const est::VelocityEvaluation e = est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
   const est::DragVelocityCounters& c = e.counters;
   const json out = {{"session", o.session},
                     {"link", session.link_id},
