@@ -1,5 +1,6 @@
 #include "sim/effects.hpp"
 
+#include <Eigen/Geometry>
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -83,6 +84,21 @@ constexpr std::array kEffects{
                [](SimConfig& c, const Values& v) {
                  c.imu.errors.vibration_hz = v[0];
                  c.imu.errors.vibration_amplitude = v[1];
+               }},
+    Effect{.info = {"accel_nonlinearity", "C", "each accelerometer axis also reads C times its specific force squared, "
+                                               "1/(m/s^2)"},
+           .counts = {1, 1},
+           .min = -1,
+           .max = 1,
+           .apply = [](SimConfig& c, const Values& v) { c.imu.errors.accel_nonlinearity = v[0]; }},
+    Effect{.info = {"imu_tilt", "A", "the sensor turned by A rad about y_b, the paper's alpha (replaces the scenario's)"},
+           .counts = {1, 1},
+           .min = -3.2,
+           .max = 3.2,
+           .apply =
+               [](SimConfig& c, const Values& v) {
+                 c.imu.pose.sensor_from_body =
+                     Eigen::AngleAxisd(v[0], Eigen::Vector3d::UnitY()).toRotationMatrix().transpose();
                }},
     Effect{.info = {"accel_noise", "D", "accelerometer white noise density, m/s^2/sqrt(Hz)"},
            .counts = {1, 1},

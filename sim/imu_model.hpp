@@ -29,6 +29,7 @@ struct ImuErrors {
   double time_offset_s = 0.0;                      // > 0: the accelerometer's samples lag the gyro's
   double vibration_hz = 0.0;                       // motor vibration added on every accelerometer axis
   double vibration_amplitude = 0.0;                // m/s^2
+  double accel_nonlinearity = 0.0;                 // 1/(m/s^2): each axis also reads this times its force squared
 };
 
 struct ImuConfig {

@@ -1,0 +1,132 @@
+#pragma once
+// What `imubridge diagnose` finds (docs/effects.md, docs/diagnose.md): the base model's fit, each effect the greedy
+// search added, the residual's analysis before and after, and what structure is left unexplained. Filled by
+// diagnose::run_diagnosis(); written by write_report_json() and write_report_html(). Plain data, no behaviour.
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace imubridge::diagnose {
+
+// ---- residual analysis (residual_analysis.hpp computes it) ----
+
+// A candidate signal's best cross-correlation with the residual over the lags searched.
+struct SignalCorrelation {
+  std::string signal;        // e.g. "gyro.y", "gyro_rate.y", "gyro.y^2", "accel.z", "velocity.x", "tilt.x", "thrust"
+  double lag_s = 0.0;        // residual(t) best matches signal(t - lag_s); positive: the residual lags the signal
+  double coefficient = 0.0;  // Pearson correlation at that lag, -1..1
+  double threshold = 0.0;    // |coefficient| above this is significant (accounts for the residual's own correlation)
+  bool significant = false;
+};
+
+struct SpectralPeak {
+  double frequency_hz = 0.0;
+  double power_ratio = 0.0;  // the peak's power spectral density over the local median (a line stands far above)
+  bool ignored = false;      // inside a band the caller told the search to ignore (AnalysisOptions::ignore_bands)
+};
+
+struct ResidualAnalysis {
+  std::size_t samples = 0;
+  double sample_rate_hz = 0.0;  // 1 / median sample step
+  double rms = 0.0;   // m/s^2
+  double mean = 0.0;  // m/s^2
+  // Normalised autocorrelation at lags 0..max_lag samples (acf[0] = 1).
+  std::vector<double> autocorrelation;
+  // Ljung-Box portmanteau test on the autocorrelation of the (decimated, see docs) residual.
+  int ljung_box_lags = 0;
+  double ljung_box_lag_spacing_s = 0.0;  // the test's lags are multiples of this (docs/residual-analysis.md)
+  double ljung_box_q = 0.0;
+  double ljung_box_p = 1.0;
+  bool white = true;  // p >= the test's significance level
+  // Welch power spectral density, one-sided, (m/s^2)^2/Hz.
+  std::vector<double> frequency_hz;
+  std::vector<double> psd;
+  std::vector<SpectralPeak> peaks;  // strongest first
+  std::vector<SignalCorrelation> correlations;  // strongest |coefficient| first
+  // Linear trend of the residual over time: slope, its standard error, significant when |slope| > 3 std errors.
+  double trend_per_s = 0.0;
+  double trend_std_error = 0.0;
+  bool trend_significant = false;
+  double trend_variance_fraction = 0.0;  // share of the residual's variance the trend accounts for
+};
+
+// ---- the model search ----
+
+struct ParameterEstimate {
+  std::string name;  // "k_x", "bias.y", "tau", ...; unique within an effect
+  double value = 0.0;
+  double std_error = 0.0;  // NaN when the covariance could not be computed
+  std::string unit;        // "1/s", "m/s^2", "s", ...
+};
+
+// One fitted model: the base model plus zero or more effects, fitted together on the training window.
+struct ModelFit {
+  std::vector<std::string> effects;        // names as in docs/effects.md, in the order added (empty: base model)
+  std::vector<ParameterEstimate> base_params;            // the base model's parameters, refitted with the effects
+  std::vector<std::vector<ParameterEstimate>> effect_params;  // one list per entry of `effects`
+  std::size_t free_parameters = 0;
+  double rmse_train = 0.0;       // m/s^2, over the axes diagnosed
+  double rmse_validation = 0.0;  // m/s^2
+  std::vector<double> convergence;  // cost (sqrt of the sum of squared residuals) after each solver iteration
+};
+
+// One candidate tried at one step of the greedy search.
+struct CandidateTrial {
+  std::string effect;
+  double rmse_train = 0.0;
+  double rmse_validation = 0.0;
+  double statistic = 0.0;  // the significance rule's statistic (docs/diagnose.md)
+  double p_value = 1.0;
+  bool significant = false;
+  std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit)
+};
+
+struct Step {
+  std::string effect;  // the effect added at this step
+  std::vector<ParameterEstimate> params;  // its parameters, after the refit of everything
+  ModelFit fit;                           // the whole model after this step
+  double rmse_train_before = 0.0, rmse_validation_before = 0.0;
+  std::vector<CandidateTrial> candidates;  // every candidate tried at this step, best validation RMSE first
+  std::vector<ResidualAnalysis> residual;  // validation residual after this step, one per axis diagnosed
+};
+
+// Structure left in the final residual that no library effect took away.
+struct Unexplained {
+  std::string kind;    // "frequency", "correlation" or "trend"
+  std::string axis;    // "x" or "y"
+  std::string where;   // one readable line: "line at 37.5 Hz, 40x the median power", "accel.z at lag +0.010 s, r=0.41"
+  double frequency_hz = 0.0;  // kind == "frequency"
+  std::string signal;         // kind == "correlation"
+  double lag_s = 0.0;         // kind == "correlation"
+  double value = 0.0;         // power ratio, correlation coefficient, or trend (m/s^2 per s)
+};
+
+// Per axis, the validation window's signals for the plots.
+struct AxisSeries {
+  std::string axis;  // "x" or "y"
+  std::vector<double> t;  // s, session time
+  std::vector<double> measured, base_model, final_model;  // m/s^2
+};
+
+struct Diagnosis {
+  // What was asked.
+  std::string session;          // "DB#ID" or a description of the data
+  std::string model;            // "paper" or "full"
+  std::vector<std::string> axes;  // "x", "y"
+  std::string velocity_source;  // "reference" or "imu" (eq. 12 / dead reckoning from the gyro-integrated tilt)
+  double train_start = 0.0, train_end = 0.0, validate_start = 0.0, validate_end = 0.0;  // s
+  std::string significance_rule;  // one line: the rule and its level
+  // What was found.
+  ModelFit base;
+  std::vector<ResidualAnalysis> base_residual;  // validation residual of the base model, one per axis
+  std::vector<Step> steps;                      // in the order chosen
+  std::vector<CandidateTrial> last_candidates;  // the step that stopped the search: every candidate and why it failed
+  ModelFit final;
+  std::vector<ResidualAnalysis> final_residual;
+  bool residual_white = false;  // every axis's final validation residual passes Ljung-Box
+  std::vector<Unexplained> unexplained;
+  std::vector<AxisSeries> series;
+};
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,140 @@
+#pragma once
+// One named, documented extension of the accelerometer model (docs/effects.md): its parameters, whether it can be
+// tried on these data, and what it does to the model. The model (diagnose/model.hpp) evaluates in fixed stages and
+// calls each effect's hook for every stage; an effect overrides only the one or two stages it acts in:
+//   1. gyro        adjust_gyro          the gyro the model uses (gyro bias)
+//   2. timing      time_offset          the model's inputs are taken at t - tau (accel-gyro time offset)
+//   3. velocity    wind_ned, drag_in_dynamics, add_drag
+//                                       air velocity and the drag law; drag in the vehicle's own dynamics
+//   4. sensor      adjust_sensor        the predicted reading in IMU axes, through the sensor's errors (scale, cross)
+//   5. prediction  add_prediction       terms added to the prediction in the residual's frame (bias, vibration,
+//                                       lever arm z)
+//   and measured_thrust: the base model takes T from the body-z reading instead of g.
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <limits>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "diagnose/signals.hpp"
+#include "estimator/paper_model.hpp"
+
+namespace imubridge::diagnose {
+
+enum class BaseModel { kPaper, kFull };         // eq. (14) per axis; the 3-D rigid body and mounting
+enum class VelocitySource { kReference, kImu };  // the reference trajectory; integrated from the gyro (eq. 12)
+
+// What the effects know of the diagnosis.
+struct ModelSetup {
+  BaseModel base = BaseModel::kPaper;
+  VelocitySource velocity = VelocitySource::kReference;
+  std::vector<int> axes{0, 1};  // diagnosed axes: 0 = x, 1 = y (paper: sensor axes; full: levelled body axes)
+  const Signals* signals = nullptr;
+  std::vector<std::pair<double, double>> ignore_bands;  // Hz: the frequency search leaves these alone
+  // > 0: measured and predicted are low-passed alike (zero phase, lowpass.hpp) before they are compared, Hz.
+  double lowpass_hz = 0.0;
+};
+
+struct Parameter {
+  std::string name;  // unique within its effect ("k.x", "tau", ...)
+  std::string unit;
+  double initial = 0.0;
+  double lower = -std::numeric_limits<double>::infinity();
+  double upper = std::numeric_limits<double>::infinity();
+};
+
+// Horizontal drag per body axis as a specific force, -k v - mu |v| v (estimator/drag_law.hpp), on the air velocity.
+struct DragLaw {
+  Eigen::Vector2d k = Eigen::Vector2d::Zero();   // 1/s
+  Eigen::Vector2d mu = Eigen::Vector2d::Zero();  // 1/m
+};
+
+// The model's inputs at every sample once stages 1-3 have run.
+struct ModelInputs {
+  std::vector<Eigen::Vector3d> gyro, gyro_rate;  // IMU axes
+  std::vector<Eigen::Vector3d> velocity;         // body-axis AIR velocity (ground velocity minus wind), m/s
+  std::vector<Eigen::Quaterniond> attitude;      // body -> NED (reference, or integrated from the gyro)
+  std::vector<double> thrust;                    // T, m/s^2: g, or the measured body-z reading (measured_thrust)
+};
+
+// What stage 5 sees: the inputs and the base model's current geometry, over samples [first, first + count).
+struct PredictionContext {
+  const ModelSetup& setup;
+  const ModelInputs& inputs;
+  std::vector<estimator::PaperAxisParams> paper;  // paper base: per diagnosed axis
+  Eigen::Matrix3d imu_to_body = Eigen::Matrix3d::Identity();  // full base: R_bs
+  std::size_t first = 0, count = 0;
+};
+
+// Per diagnosed axis (in ModelSetup::axes order), one value per sample of the range.
+using AxisValues = std::vector<std::vector<double>>;
+
+// For effects whose starting values come from the data: the current model's training residual.
+struct StartContext {
+  const ModelSetup& setup;
+  std::span<const double> t;  // training window's times
+  const AxisValues& residual;  // training residual per diagnosed axis
+};
+
+class Effect {
+ public:
+  virtual ~Effect() = default;
+  virtual std::string_view name() const = 0;
+  // Why this effect cannot be tried with this base model, velocity source or effect set, or nullopt.
+  virtual std::optional<std::string> why_not(const ModelSetup&, std::span<const std::string> in_model) const {
+    (void)in_model;
+    return std::nullopt;
+  }
+  virtual std::vector<Parameter> parameters(const ModelSetup&) const = 0;
+  // Starting values (defaults: each Parameter::initial, already in `p`); an error when the data offer none.
+  virtual std::optional<std::string> start(const StartContext&, std::span<double> p) const {
+    (void)p;
+    return std::nullopt;
+  }
+  // Further starting points the fit tries besides start()'s, for effects whose fit has more than one basin; the
+  // search keeps the fit with the lowest training cost.
+  virtual std::vector<std::vector<double>> more_starts(std::span<const double> start) const {
+    (void)start;
+    return {};
+  }
+  // True when stages 1-3 depend on this effect's parameters (the model then recomputes its inputs every time).
+  virtual bool changes_inputs() const { return false; }
+
+  virtual void adjust_gyro(std::span<const double>, const ModelSetup&, std::vector<Eigen::Vector3d>&) const {}
+  virtual double time_offset(std::span<const double>) const { return 0.0; }
+  virtual Eigen::Vector3d wind_ned(std::span<const double>) const { return Eigen::Vector3d::Zero(); }
+  virtual bool drag_in_dynamics() const { return false; }
+  virtual bool adds_drag() const { return false; }  // true for effects that override add_drag
+  virtual void add_drag(std::span<const double>, const ModelSetup&, DragLaw&) const {}
+  virtual bool measured_thrust() const { return false; }
+  // `predicted` and `measured` hold the range's samples in IMU axes (the paper model fills only its axes).
+  virtual void adjust_sensor(std::span<const double>, const ModelSetup&, std::span<Eigen::Vector3d> predicted,
+                             std::span<const Eigen::Vector3d> measured) const {
+    (void)predicted, (void)measured;
+  }
+  virtual void add_prediction(std::span<const double>, const PredictionContext&, AxisValues&) const {}
+};
+
+// "x", "y" or "z".
+inline std::string axis_name(int axis) { return std::string(1, static_cast<char>('x' + axis)); }
+
+// One parameter per diagnosed axis: "<prefix>.x", "<prefix>.y".
+inline std::vector<Parameter> per_axis(const ModelSetup& setup, const std::string& prefix, const std::string& unit,
+                                       double lower, double upper) {
+  std::vector<Parameter> out;
+  for (int axis : setup.axes) out.push_back({prefix + "." + axis_name(axis), unit, 0.0, lower, upper});
+  return out;
+}
+
+inline bool contains(std::span<const std::string> names, std::string_view name) {
+  for (const std::string& n : names) {
+    if (n == name) return true;
+  }
+  return false;
+}
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,28 @@
+// quadratic_drag: the paper's drag -mu |v| v on each horizontal body axis, for a base model without it
+// (docs/effects.md).
+#include "diagnose/effects/library.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+class QuadraticDrag final : public Effect {
+ public:
+  std::string_view name() const override { return "quadratic_drag"; }
+  std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
+    if (setup.base == BaseModel::kPaper) return "eq. (14) already has the quadratic drag mu";
+    return std::nullopt;
+  }
+  std::vector<Parameter> parameters(const ModelSetup& setup) const override {
+    return per_axis(setup, "mu", "1/m", 0.0, 100.0);
+  }
+  bool adds_drag() const override { return true; }
+  void add_drag(std::span<const double> p, const ModelSetup& setup, DragLaw& law) const override {
+    for (std::size_t i = 0; i < setup.axes.size(); ++i) law.mu[setup.axes[i]] += p[i];
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_quadratic_drag() { return std::make_unique<QuadraticDrag>(); }
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,28 @@
+// self_consistent_velocity: the IMU-only velocity integrated with the identified drag in the vehicle's own
+// dynamics, instead of eq. (12)'s drag-free integration that drifts (docs/effects.md). No parameter of its own: it
+// uses the model's drag law, refitted with it.
+#include "diagnose/effects/library.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+class SelfConsistentVelocity final : public Effect {
+ public:
+  std::string_view name() const override { return "self_consistent_velocity"; }
+  std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
+    if (setup.velocity == VelocitySource::kReference) return "the velocity comes from the reference trajectory";
+    const bool drag = setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") ||
+                      contains(in_model, "quadratic_drag");
+    if (!drag) return "the model has no drag law to integrate yet";
+    return std::nullopt;
+  }
+  std::vector<Parameter> parameters(const ModelSetup&) const override { return {}; }
+  bool changes_inputs() const override { return true; }
+  bool drag_in_dynamics() const override { return true; }
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_self_consistent_velocity() { return std::make_unique<SelfConsistentVelocity>(); }
+
+}  // namespace imubridge::diagnose

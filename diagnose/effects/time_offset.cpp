@@ -1,0 +1,20 @@
+// time_offset: the accelerometer's samples lag the gyro's by tau; the model takes its inputs at t - tau
+// (docs/effects.md).
+#include "diagnose/effects/library.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+class TimeOffset final : public Effect {
+ public:
+  std::string_view name() const override { return "time_offset"; }
+  std::vector<Parameter> parameters(const ModelSetup&) const override { return {{"tau", "s", 0.0, -0.25, 0.25}}; }
+  bool changes_inputs() const override { return true; }
+  double time_offset(std::span<const double> p) const override { return p[0]; }
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_time_offset() { return std::make_unique<TimeOffset>(); }
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,33 @@
+// wind: a constant air velocity; drag acts on the ground velocity minus the wind (docs/effects.md).
+#include "diagnose/effects/library.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+class Wind final : public Effect {
+ public:
+  std::string_view name() const override { return "wind"; }
+  std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
+    const bool drag = setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") ||
+                      contains(in_model, "quadratic_drag");
+    if (!drag) return "wind acts through drag, and the model has none yet";
+    return std::nullopt;
+  }
+  std::vector<Parameter> parameters(const ModelSetup&) const override {
+    return {{"north", "m/s", 0.0, -30.0, 30.0}, {"east", "m/s", 0.0, -30.0, 30.0}};
+  }
+  bool changes_inputs() const override { return true; }
+  // Drag on v - w is not convex in w: from no wind, LM can settle in a linear-drag-like minimum. So the fit also
+  // starts from a moderate breeze (4 m/s, mid-range for a small multirotor's flying weather) from each quarter.
+  std::vector<std::vector<double>> more_starts(std::span<const double>) const override {
+    constexpr double kBreeze = 4.0;
+    return {{kBreeze, 0.0}, {-kBreeze, 0.0}, {0.0, kBreeze}, {0.0, -kBreeze}};
+  }
+  Eigen::Vector3d wind_ned(std::span<const double> p) const override { return {p[0], p[1], 0.0}; }
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_wind() { return std::make_unique<Wind>(); }
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,480 @@
+#include "diagnose/model.hpp"
+
+#include "diagnose/lowpass.hpp"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "estimator/constants.hpp"
+#include "estimator/drag_law.hpp"
+#include "estimator/full_model.hpp"
+#include "estimator/least_squares.hpp"
+#include "estimator/velocity.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+using estimator::kGravity;
+
+constexpr std::size_t kPaperParams = 4;  // r, beta, alpha, mu per axis
+
+Eigen::Matrix3d rotation(const double* rotation_vector) {
+  return rotation_matrix(Vector3d(rotation_vector[0], rotation_vector[1], rotation_vector[2]));
+}
+
+std::vector<Parameter> base_parameters(const ModelSetup& setup) {
+  std::vector<Parameter> out;
+  if (setup.base == BaseModel::kPaper) {
+    for (int axis : setup.axes) {
+      const std::string a = axis_name(axis) + ".";
+      out.push_back({a + "r", "m", 0.0, 0.0});
+      out.push_back({a + "beta", "rad"});
+      out.push_back({a + "alpha", "rad"});
+      out.push_back({a + "mu", "1/m", 0.0, 0.0});
+    }
+  } else {
+    for (int i = 0; i < 3; ++i) out.push_back({"lever_arm." + std::to_string(i), "m"});
+    for (int i = 0; i < 3; ++i) out.push_back({"mounting." + std::to_string(i), "rad"});
+  }
+  return out;
+}
+
+estimator::PaperAxisParams paper_axis(std::span<const double> base, std::size_t i) {
+  const double* p = base.data() + kPaperParams * i;
+  return {p[0], p[1], p[2], p[3]};
+}
+
+// x(t - tau) by linear interpolation between samples, held at the ends.
+template <typename Value>
+std::vector<Value> delayed(std::span<const double> t, const std::vector<Value>& x, double tau) {
+  std::vector<Value> out(x.size());
+  std::size_t j = 0;
+  for (std::size_t k = 0; k < t.size(); ++k) {
+    const double at = t[k] - tau;
+    if (at <= t.front()) {
+      out[k] = x.front();
+      continue;
+    }
+    if (at >= t.back()) {
+      out[k] = x.back();
+      continue;
+    }
+    while (j + 1 < t.size() && t[j + 1] < at) ++j;
+    while (j > 0 && t[j] > at) --j;
+    const double f = (at - t[j]) / (t[j + 1] - t[j]);
+    out[k] = (1.0 - f) * x[j] + f * x[j + 1];
+  }
+  return out;
+}
+
+std::vector<Quaterniond> delayed(std::span<const double> t, const std::vector<Quaterniond>& q, double tau) {
+  std::vector<Eigen::Vector4d> coeffs(q.size());
+  for (std::size_t k = 0; k < q.size(); ++k) coeffs[k] = q[k].coeffs();
+  const std::vector<Eigen::Vector4d> shifted = delayed(t, coeffs, tau);
+  std::vector<Quaterniond> out(q.size());
+  for (std::size_t k = 0; k < q.size(); ++k) out[k] = Quaterniond(shifted[k]).normalized();  // nlerp
+  return out;
+}
+
+// One paper axis's eq. (12) with drag in the dynamics: v' = g sin(theta) - F(v_air), in the paper's sign
+// (v = minus the body-axis velocity), F the body-axis drag specific force on the air velocity -v - w.
+std::vector<double> integrate_paper_axis(std::span<const double> t, std::span<const double> theta, double k, double mu,
+                                         double wind_body) {
+  std::vector<double> v(t.size(), 0.0);
+  const auto rate = [&](std::size_t i, double velocity) {
+    return kGravity * std::sin(theta[i]) - estimator::drag_specific_force(k, mu, -velocity - wind_body);
+  };
+  for (std::size_t i = 1; i < t.size(); ++i) {
+    const double dt = t[i] - t[i - 1];
+    const double a0 = rate(i - 1, v[i - 1]);
+    const double predicted = v[i - 1] + dt * a0;  // Heun: Euler predictor, trapezoidal corrector
+    v[i] = v[i - 1] + 0.5 * dt * (a0 + rate(i, predicted));
+  }
+  return v;
+}
+
+// dead_reckon() with the horizontal drag law acting on the body-axis air velocity.
+estimator::DeadReckoning dead_reckon_with_drag(std::span<const double> t, std::span<const Vector3d> gyro_body,
+                                               std::span<const double> thrust, const DragLaw& law,
+                                               const Vector3d& wind) {
+  estimator::DeadReckoning out = estimator::dead_reckon(t, gyro_body, thrust);  // the attitude is drag-free
+  const auto acceleration = [&](std::size_t i, const Vector3d& v_ned) {
+    const Quaterniond& q = out.attitude[i];
+    const Vector3d air = q.conjugate() * (v_ned - wind);
+    const Vector3d drag(estimator::drag_specific_force(law.k.x(), law.mu.x(), air.x()),
+                        estimator::drag_specific_force(law.k.y(), law.mu.y(), air.y()), 0.0);
+    return Vector3d(q * (Vector3d(0.0, 0.0, -thrust[i]) + drag) + Vector3d(0.0, 0.0, kGravity));
+  };
+  for (std::size_t i = 1; i < t.size(); ++i) {
+    const double dt = t[i] - t[i - 1];
+    const Vector3d a0 = acceleration(i - 1, out.velocity_ned[i - 1]);
+    const Vector3d predicted = out.velocity_ned[i - 1] + dt * a0;
+    out.velocity_ned[i] = out.velocity_ned[i - 1] + 0.5 * dt * (a0 + acceleration(i, predicted));
+  }
+  return out;
+}
+
+}  // namespace
+
+AxisValues Evaluation::residual() const {
+  AxisValues out = measured;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    for (std::size_t k = 0; k < out[i].size(); ++k) out[i][k] -= predicted[i][k];
+  }
+  return out;
+}
+
+Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*> effects)
+    : setup_(std::move(setup)), effects_(std::move(effects)) {
+  setup_.signals = &signals;
+  if (setup_.axes.empty()) throw std::invalid_argument("diagnose: no axis to diagnose");
+  if (setup_.velocity == VelocitySource::kReference && !signals.reference)
+    throw std::invalid_argument("diagnose: velocity from the reference, but the session has no reference trajectory");
+  parameters_ = base_parameters(setup_);
+  base_size_ = parameters_.size();
+  std::vector<std::string> before;
+  for (const Effect* effect : effects_) {
+    if (auto why = effect->why_not(setup_, before))
+      throw std::invalid_argument("effect " + std::string(effect->name()) + " does not apply: " + *why);
+    offsets_.push_back(parameters_.size());
+    for (const Parameter& p : effect->parameters(setup_)) parameters_.push_back(p);
+    before.emplace_back(effect->name());
+  }
+  offsets_.push_back(parameters_.size());
+
+  // Which parameters stages 1-3 depend on: the mounting when the full model integrates the gyro in body axes, the
+  // parameters of effects acting there, and every drag coefficient once drag is in the dynamics.
+  input_parameter_.assign(parameters_.size(), false);
+  const bool drag_in_dynamics =
+      std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->drag_in_dynamics(); });
+  if (setup_.base == BaseModel::kFull && setup_.velocity == VelocitySource::kImu) {
+    for (std::size_t i = 3; i < 6; ++i) input_parameter_[i] = true;
+  }
+  if (setup_.base == BaseModel::kPaper && drag_in_dynamics) {
+    for (std::size_t i = 0; i < setup_.axes.size(); ++i) input_parameter_[kPaperParams * i + 3] = true;
+  }
+  for (std::size_t e = 0; e < effects_.size(); ++e) {
+    if (effects_[e]->changes_inputs() || (drag_in_dynamics && effects_[e]->adds_drag())) {
+      for (std::size_t i = offsets_[e]; i < offsets_[e + 1]; ++i) input_parameter_[i] = true;
+    }
+  }
+  if (std::none_of(input_parameter_.begin(), input_parameter_.end(), [](bool b) { return b; }))
+    fixed_inputs_ = compute_inputs(std::vector<double>(parameters_.size(), 0.0));
+}
+
+const ModelInputs& Model::inputs_for(std::span<const double> p) const {
+  if (fixed_inputs_) return *fixed_inputs_;
+  std::vector<double> key;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (input_parameter_[i]) key.push_back(p[i]);
+  }
+  if (!cached_inputs_ || key != cached_key_) {
+    cached_inputs_ = compute_inputs(p);
+    cached_key_ = std::move(key);
+  }
+  return *cached_inputs_;
+}
+
+ModelInputs Model::inputs(std::span<const double> p) const { return inputs_for(p); }
+
+ModelInputs Model::compute_inputs(std::span<const double> p) const {
+  const Signals& s = signals();
+  const std::span<const double> t = s.t;
+  const std::size_t n = s.size();
+  const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
+  ModelInputs in;
+
+  // 1. gyro
+  in.gyro = s.gyro;
+  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->adjust_gyro(params_of(i), setup_, in.gyro);
+  in.gyro_rate = s.gyro_rate;
+
+  // 2. timing: the accelerometer's sample at t saw the motion of t - tau.
+  double tau = 0.0;
+  for (std::size_t i = 0; i < effects_.size(); ++i) tau += effects_[i]->time_offset(params_of(i));
+  if (tau != 0.0) {
+    in.gyro = delayed(t, in.gyro, tau);
+    in.gyro_rate = delayed(t, in.gyro_rate, tau);
+  }
+
+  // 3. velocity: the drag law of the base model and the effects, the wind, and drag in the dynamics or not.
+  DragLaw law;
+  if (setup_.base == BaseModel::kPaper) {
+    for (std::size_t i = 0; i < setup_.axes.size(); ++i) law.mu[setup_.axes[i]] = p[kPaperParams * i + 3];
+  }
+  Vector3d wind = Vector3d::Zero();
+  bool drag_in_dynamics = false, measured_thrust = false;
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    effects_[i]->add_drag(params_of(i), setup_, law);
+    wind += effects_[i]->wind_ned(params_of(i));
+    drag_in_dynamics = drag_in_dynamics || effects_[i]->drag_in_dynamics();
+    measured_thrust = measured_thrust || effects_[i]->measured_thrust();
+  }
+  in.thrust = measured_thrust ? s.thrust : std::vector<double>(n, kGravity);
+
+  if (setup_.velocity == VelocitySource::kReference) {
+    in.velocity = s.reference->velocity_body;
+    in.attitude = s.reference->attitude;
+    if (tau != 0.0) {
+      in.velocity = delayed(t, in.velocity, tau);
+      in.attitude = delayed(t, in.attitude, tau);
+    }
+  } else if (setup_.base == BaseModel::kPaper) {
+    // Eq. (11)-(12) per axis; the roll axis is the pitch model turned 90 deg about z_b (omega' = -omega_x).
+    std::vector<double> pitch_rate(n), roll_rate(n);
+    for (std::size_t k = 0; k < n; ++k) pitch_rate[k] = in.gyro[k].y(), roll_rate[k] = -in.gyro[k].x();
+    const estimator::PitchIntegration pitch = estimator::integrate_pitch(t, pitch_rate);
+    const estimator::PitchIntegration roll = estimator::integrate_pitch(t, roll_rate);
+    std::vector<double> v_pitch = pitch.v, v_roll = roll.v;
+    if (drag_in_dynamics) {
+      // With the yaw held, body axes x and y point north and east to first order.
+      v_pitch = integrate_paper_axis(t, pitch.theta, law.k.x(), law.mu.x(), wind.x());
+      v_roll = integrate_paper_axis(t, roll.theta, law.k.y(), law.mu.y(), wind.y());
+    }
+    in.velocity.resize(n);
+    in.attitude.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      in.velocity[k] = {-v_pitch[k], -v_roll[k], 0.0};
+      in.attitude[k] = Eigen::AngleAxisd(pitch.theta[k], Vector3d::UnitY()) *
+                       Eigen::AngleAxisd(-roll.theta[k], Vector3d::UnitX());
+    }
+  } else {
+    // The 3-D generalisation: the gyro turned into body axes by the mounting being fitted.
+    const Eigen::Matrix3d imu_to_body = rotation(p.data() + 3);
+    std::vector<Vector3d> gyro_body(n);
+    for (std::size_t k = 0; k < n; ++k) gyro_body[k] = imu_to_body * in.gyro[k];
+    const std::vector<double> g(n, kGravity);
+    const estimator::DeadReckoning dr = drag_in_dynamics ? dead_reckon_with_drag(t, gyro_body, g, law, wind)
+                                                         : estimator::dead_reckon(t, gyro_body, g);
+    in.attitude = dr.attitude;
+    in.velocity = estimator::body_velocity(dr.attitude, dr.velocity_ned);
+  }
+  if (!wind.isZero()) {
+    for (std::size_t k = 0; k < n; ++k) in.velocity[k] -= in.attitude[k].conjugate() * wind;
+  }
+  return in;
+}
+
+Evaluation Model::evaluate(std::span<const double> p, Range range) const {
+  if (p.size() != parameters_.size()) throw std::invalid_argument("Model::evaluate: wrong number of parameters");
+  if (range.first + range.count > signals().size()) throw std::invalid_argument("Model::evaluate: range too long");
+  const ModelInputs& in = inputs_for(p);
+  const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
+  const std::size_t axes = setup_.axes.size();
+
+  const std::span<const Vector3d> measured(signals().accel.data() + range.first, range.count);
+  // The effects' own drag (the paper's mu is inside eq. 14).
+  DragLaw effect_drag;
+  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_drag(params_of(i), setup_, effect_drag);
+
+  // The base model's predicted reading in IMU axes (the paper model fills the axes it diagnoses).
+  std::vector<Vector3d> predicted(range.count, Vector3d::Zero());
+  PredictionContext ctx{setup_, in, {}, Eigen::Matrix3d::Identity(), range.first, range.count};
+  estimator::FullModelParams full;
+  if (setup_.base == BaseModel::kPaper) {
+    for (std::size_t i = 0; i < axes; ++i) {
+      const int axis = setup_.axes[i];
+      const bool pitch = axis == 0;
+      const estimator::PaperAxisParams params = paper_axis(p, i);
+      ctx.paper.push_back(params);
+      const estimator::PaperCoefficients<double> c = estimator::paper_coefficients(params);
+      const double sin_alpha = std::sin(params.alpha);
+      for (std::size_t k = 0; k < range.count; ++k) {
+        const std::size_t j = range.first + k;
+        const estimator::PaperSample sample{.t = signals().t[j],
+                                            .omega = pitch ? in.gyro[j].y() : -in.gyro[j].x(),
+                                            .omega_dot = pitch ? in.gyro_rate[j].y() : -in.gyro_rate[j].x(),
+                                            .v = -in.velocity[j][axis]};
+        // Eq. (14) takes U1 = g; with the thrust effect it is the measured T.
+        predicted[k][axis] = estimator::paper_specific_force(c, sample) + (in.thrust[j] - kGravity) * sin_alpha +
+                             estimator::drag_specific_force(effect_drag.k[axis], effect_drag.mu[axis],
+                                                            in.velocity[j][axis]);
+      }
+    }
+  } else {
+    full.lever_arm = Vector3d(p[0], p[1], p[2]);
+    full.mounting = Vector3d(p[3], p[4], p[5]);
+    full.drag_linear = effect_drag.k;
+    full.drag_quadratic = effect_drag.mu;
+    ctx.imu_to_body = rotation(p.data() + 3);
+    for (std::size_t k = 0; k < range.count; ++k) {
+      const std::size_t j = range.first + k;
+      predicted[k] = estimator::predict_specific_force(full, {.gyro = in.gyro[j],
+                                                              .gyro_rate = in.gyro_rate[j],
+                                                              .velocity = in.velocity[j].head<2>(),
+                                                              .thrust = in.thrust[j]});
+    }
+  }
+  // 4. sensor
+  for (std::size_t i = 0; i < effects_.size(); ++i)
+    effects_[i]->adjust_sensor(params_of(i), setup_, predicted, measured);
+
+  // In the residual's frame: the paper model's sensor axes; the full model's body axes, where the thrust (unknown
+  // per sample) only has a z component, so rows x and y.
+  Evaluation e{AxisValues(axes, std::vector<double>(range.count)), AxisValues(axes, std::vector<double>(range.count))};
+  for (std::size_t k = 0; k < range.count; ++k) {
+    const Vector3d m = setup_.base == BaseModel::kPaper ? measured[k] : Vector3d(ctx.imu_to_body * measured[k]);
+    const Vector3d f = setup_.base == BaseModel::kPaper ? predicted[k] : Vector3d(ctx.imu_to_body * predicted[k]);
+    for (std::size_t i = 0; i < axes; ++i) {
+      e.measured[i][k] = m[setup_.axes[i]];
+      e.predicted[i][k] = f[setup_.axes[i]];
+    }
+  }
+  // 5. prediction
+  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_prediction(params_of(i), ctx, e.predicted);
+  // The band limit: both sides alike, so the residual is the model's error inside the band.
+  if (setup_.lowpass_hz > 0.0 && range.count > 1) {
+    const std::vector<double>& t = signals().t;
+    const double rate_hz =
+        static_cast<double>(range.count - 1) / (t[range.first + range.count - 1] - t[range.first]);
+    for (std::size_t i = 0; i < axes; ++i) {
+      zero_phase_lowpass(e.measured[i], setup_.lowpass_hz, rate_hz);
+      zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, rate_hz);
+    }
+  }
+  return e;
+}
+
+void Model::residuals(std::span<const double> p, Range range, double* out) const {
+  const Evaluation e = evaluate(p, range);
+  const std::size_t axes = e.measured.size();
+  for (std::size_t k = 0; k < range.count; ++k) {
+    for (std::size_t i = 0; i < axes; ++i) out[k * axes + i] = e.measured[i][k] - e.predicted[i][k];
+  }
+}
+
+double Model::rmse(std::span<const double> p, Range range) const {
+  if (range.count == 0) return 0.0;
+  std::vector<double> r(range.count * setup_.axes.size());
+  residuals(p, range, r.data());
+  double sum = 0.0;
+  for (double x : r) sum += x * x;
+  return std::sqrt(sum / static_cast<double>(r.size()));
+}
+
+std::vector<double> Model::base_start(Range range) const {
+  std::vector<double> p(parameters_.size());
+  for (std::size_t i = 0; i < p.size(); ++i) p[i] = parameters_[i].initial;
+  if (setup_.base == BaseModel::kFull) {
+    for (int i = 0; i < 3; ++i) p[3 + i] = signals().level_mounting[i];
+    return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
+  }
+  // Eq. (14) is linear in its four combinations: their least-squares fit is the optimum of the base alone.
+  const ModelInputs in = inputs(p);
+  for (std::size_t i = 0; i < setup_.axes.size(); ++i) {
+    const int axis = setup_.axes[i];
+    const bool pitch = axis == 0;
+    std::vector<estimator::PaperSample> samples(range.count);
+    for (std::size_t k = 0; k < range.count; ++k) {
+      const std::size_t j = range.first + k;
+      samples[k] = {.t = signals().t[j],
+                    .omega = pitch ? in.gyro[j].y() : -in.gyro[j].x(),
+                    .omega_dot = pitch ? in.gyro_rate[j].y() : -in.gyro_rate[j].x(),
+                    .v = -in.velocity[j][axis],
+                    .f = signals().accel[j][axis]};
+    }
+    estimator::PaperAxisParams start;
+    try {
+      start = estimator::paper_linear_fit(samples);
+    } catch (const std::invalid_argument&) {
+      // Data that do not determine all four terms (no motion): LM starts from the precise installation.
+    }
+    p[kPaperParams * i] = start.r;
+    p[kPaperParams * i + 1] = start.beta;
+    p[kPaperParams * i + 2] = start.alpha;
+    p[kPaperParams * i + 3] = start.mu;
+  }
+  return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
+}
+
+namespace {
+
+struct ModelCost {
+  const Model* model;
+  Range range;
+  bool operator()(double const* const* parameters, double* residuals) const {
+    model->residuals({parameters[0], model->parameters().size()}, range, residuals);
+    return true;
+  }
+};
+
+class RecordCost final : public ceres::IterationCallback {
+ public:
+  explicit RecordCost(std::vector<double>& costs) : costs_(costs) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    if (summary.step_is_successful || summary.iteration == 0) costs_.push_back(std::sqrt(2.0 * summary.cost));
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  std::vector<double>& costs_;
+};
+
+}  // namespace
+
+FitOutcome fit(const Model& model, std::vector<double> start, Range range) {
+  const std::vector<Parameter>& params = model.parameters();
+  if (start.size() != params.size()) throw std::invalid_argument("diagnose fit: wrong number of starting values");
+  const std::size_t axes = model.setup().axes.size();
+  const std::size_t residual_count = range.count * axes;
+  if (residual_count <= params.size()) throw std::invalid_argument("diagnose fit: fewer residuals than parameters");
+  for (std::size_t i = 0; i < params.size(); ++i) start[i] = std::clamp(start[i], params[i].lower, params[i].upper);
+
+  FitOutcome out;
+  out.values = std::move(start);
+  double* x = out.values.data();
+  ceres::Problem problem;
+  auto* cost = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::CENTRAL>(new ModelCost{&model, range});
+  cost->AddParameterBlock(static_cast<int>(params.size()));
+  cost->SetNumResiduals(static_cast<int>(residual_count));
+  problem.AddResidualBlock(cost, nullptr, x);
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    if (std::isfinite(params[i].lower)) problem.SetParameterLowerBound(x, static_cast<int>(i), params[i].lower);
+    if (std::isfinite(params[i].upper)) problem.SetParameterUpperBound(x, static_cast<int>(i), params[i].upper);
+  }
+
+  ceres::Solver::Options options;
+  options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  options.linear_solver_type = ceres::DENSE_QR;
+  options.max_num_iterations = 50;
+  options.function_tolerance = 1e-10;
+  options.gradient_tolerance = 1e-12;
+  options.parameter_tolerance = 1e-10;
+  options.num_threads = 1;
+  options.logging_type = ceres::SILENT;
+  RecordCost record(out.convergence);
+  options.callbacks.push_back(&record);
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  out.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+
+  // Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same).
+  out.std_errors.assign(params.size(), std::numeric_limits<double>::quiet_NaN());
+  double final_cost = 0.0;
+  problem.Evaluate(ceres::Problem::EvaluateOptions(), &final_cost, nullptr, nullptr, nullptr);
+  const double variance = 2.0 * final_cost / static_cast<double>(residual_count - params.size());
+  ceres::Covariance::Options covariance_options;
+  covariance_options.algorithm_type = ceres::DENSE_SVD;
+  covariance_options.num_threads = 1;
+  ceres::Covariance covariance(covariance_options);
+  const std::vector<const double*> blocks{x};
+  if (covariance.Compute(blocks, &problem)) {
+    Eigen::MatrixXd c(params.size(), params.size());
+    covariance.GetCovarianceBlock(x, x, c.data());  // symmetric: storage order does not matter
+    for (std::size_t i = 0; i < params.size(); ++i)
+      out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
+  } else {
+    out.covariance_failure = "the Jacobian is rank-deficient: some parameters cannot be told apart with these data";
+  }
+  return out;
+}
+
+}  // namespace imubridge::diagnose

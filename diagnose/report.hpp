@@ -1,0 +1,33 @@
+#pragma once
+// What `imubridge diagnose --report DIR` writes: DIR/report.json for programs and DIR/report.html
+// for people. Both come from a filled Diagnosis and nothing else; the same Diagnosis gives the same bytes.
+#include <cstddef>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "diagnose/diagnosis.hpp"
+
+namespace imubridge::diagnose {
+
+// Peaks and correlations a residual summary keeps (strongest first); the full spectra and series stay out of the
+// JSON so that it stays small.
+inline constexpr std::size_t kReportTopEntries = 5;
+
+// Every field of the Diagnosis, with the names at the top level: "base", "steps", "final",
+// "residual_white", "unexplained", plus "session", "model", "axes", "velocity_source", "train_window",
+// "validation_window", "significance_rule", "last_candidates", "series". A residual analysis appears as a summary
+// (rms, mean, Ljung-Box, top peaks and correlations, trend); numbers that are not finite (a standard error the
+// covariance could not give) are null.
+nlohmann::json report_json(const Diagnosis& diagnosis);
+
+// report_json(), indented, to `file`. Throws std::invalid_argument when the file cannot be written.
+void write_report_json(const Diagnosis& diagnosis, const std::filesystem::path& file);
+
+// dir/report.html, one self-contained page (no network, no script): the summary, the model search step by step,
+// what is left unexplained, the final parameters, the candidates of each step, and plots drawn by gnuplot and
+// inlined as SVG (measured vs model before and after, residual over time, residual spectrum, convergence of each
+// fit). Without gnuplot the page has the tables and a note, and a warning is logged: a report without plots is
+// still a report. Creates `dir` if needed; throws std::invalid_argument when the page cannot be written.
+void write_report_html(const Diagnosis& diagnosis, const std::filesystem::path& dir);
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,293 @@
+#include "diagnose/search.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <boost/math/distributions/fisher_f.hpp>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "diagnose/effects/library.hpp"
+#include "diagnose/model.hpp"
+#include "diagnose/residual_analysis.hpp"
+#include "diagnose/signals.hpp"
+#include "estimator/identify.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+// Residuals that follow a manoeuvre stay correlated for about as long as it lasts, around a second: the effective
+// sample count looks that far.
+constexpr double kCorrelationSpanS = 1.0;
+
+Range range_of(const Signals& s, const estimator::TimeWindow& w) {
+  const auto first = std::lower_bound(s.t.begin(), s.t.end(), w.start);
+  const auto last = std::lower_bound(first, s.t.end(), w.end);
+  return {static_cast<std::size_t>(first - s.t.begin()), static_cast<std::size_t>(last - first)};
+}
+
+double sum_of_squares(const AxisValues& residual) {
+  double sum = 0.0;
+  for (const std::vector<double>& axis : residual) {
+    for (double r : axis) sum += r * r;
+  }
+  return sum;
+}
+
+// The current model: its effects, fitted values and what they give.
+struct State {
+  std::vector<const Effect*> effects;
+  FitOutcome fit;
+  ModelFit summary;
+  AxisValues train_residual, validation_residual;
+};
+
+std::vector<std::string> names_of(const std::vector<const Effect*>& effects) {
+  std::vector<std::string> names;
+  for (const Effect* e : effects) names.emplace_back(e->name());
+  return names;
+}
+
+ParameterEstimate estimate(const Parameter& p, const FitOutcome& fit, std::size_t i) {
+  return {p.name, fit.values[i], fit.std_errors[i], p.unit};
+}
+
+ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range validation) {
+  ModelFit out;
+  out.effects = names_of(model.effects());
+  const std::vector<Parameter>& params = model.parameters();
+  for (std::size_t i = 0; i < model.base_size(); ++i) out.base_params.push_back(estimate(params[i], fit, i));
+  for (std::size_t e = 0; e < model.effects().size(); ++e) {
+    std::vector<ParameterEstimate> list;
+    for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e) + model.effect_size(e); ++i)
+      list.push_back(estimate(params[i], fit, i));
+    out.effect_params.push_back(std::move(list));
+  }
+  out.free_parameters = params.size();
+  out.rmse_train = model.rmse(fit.values, train);
+  out.rmse_validation = model.rmse(fit.values, validation);
+  out.convergence = fit.convergence;
+  return out;
+}
+
+State settle(const Model& model, FitOutcome fit, Range train, Range validation) {
+  State s;
+  s.effects = model.effects();
+  s.summary = describe(model, fit, train, validation);
+  s.train_residual = model.evaluate(fit.values, train).residual();
+  s.validation_residual = model.evaluate(fit.values, validation).residual();
+  s.fit = std::move(fit);
+  return s;
+}
+
+std::vector<ResidualAnalysis> analyse(const Model& model, const State& state, Range validation,
+                                      const DiagnoseOptions& options) {
+  const Signals& s = model.signals();
+  const ModelInputs inputs = model.inputs(state.fit.values);
+  const std::vector<NamedSignal> candidates = candidate_signals(s, inputs.velocity, validation.first, validation.count);
+  const std::span<const double> t(s.t.data() + validation.first, validation.count);
+  AnalysisOptions analysis;
+  analysis.ignore_bands = options.ignore_bands;
+  analysis.significance = options.significance;
+  // The angular acceleration is a fit over +-kDerivativeHalfWindowS: its noise correlates the residual across the
+  // whole window even for a perfect model, so whiteness is judged at lags beyond it.
+  // A band limit correlates it over about one period of its cutoff.
+  analysis.whiteness_lag_spacing_s =
+      std::max(2.0 * kDerivativeHalfWindowS, options.lowpass_hz > 0.0 ? 1.0 / options.lowpass_hz : 0.0);
+  std::vector<ResidualAnalysis> out;
+  for (const std::vector<double>& r : state.validation_residual) out.push_back(analyse_residual(t, r, candidates, analysis));
+  return out;
+}
+
+std::string describe_rule(const DiagnoseOptions& o) {
+  char text[300];
+  std::snprintf(text, sizeof text,
+                "F-test on the validation residual sums of squares (effective sample count from the residual's "
+                "autocorrelation over %.1f s), p < %g / candidates tried, and validation RMSE lower by at least %g %%",
+                kCorrelationSpanS, o.significance, 100.0 * o.min_improvement);
+  std::string rule = text;
+  if (o.lowpass_hz > 0.0) {
+    std::snprintf(text, sizeof text, "; model and measurement compared below %g Hz (zero-phase Butterworth)",
+                  o.lowpass_hz);
+    rule += text;
+  }
+  return rule;
+}
+
+}  // namespace
+
+FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff) {
+  FTest out;
+  const double q = static_cast<double>(std::max<std::size_t>(added, 1));
+  const double denominator_dof = n_eff - static_cast<double>(parameters);
+  if (!(rss_after < rss_before) || !(denominator_dof >= 1.0) || !(rss_after > 0.0)) return out;
+  out.statistic = ((rss_before - rss_after) / q) / (rss_after / denominator_dof);
+  out.p_value = boost::math::cdf(boost::math::complement(boost::math::fisher_f(q, denominator_dof), out.statistic));
+  return out;
+}
+
+double effective_samples(std::span<const double> x, std::size_t max_lag) {
+  const double n = static_cast<double>(x.size());
+  if (x.size() < 2) return n;
+  const std::vector<double> rho = autocorrelation(x, std::min(max_lag, x.size() - 1));
+  double sum = 0.0;
+  for (std::size_t k = 1; k < rho.size() && rho[k] > 0.0; ++k) sum += rho[k];
+  return std::clamp(n / (1.0 + 2.0 * sum), 1.0, n);
+}
+
+Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
+  DiagnoseOptions options = requested;
+  if (options.lowpass_hz != 0.0) {
+    if (!(options.lowpass_hz > 0.0)) throw std::invalid_argument("diagnose: the low-pass cutoff must be positive");
+    // Above the band limit the residual holds nothing to fit and no line to report.
+    options.ignore_bands.emplace_back(options.lowpass_hz, std::numeric_limits<double>::infinity());
+  }
+  const Signals signals = prepare_signals(series);
+  ModelSetup setup;
+  setup.base = options.model;
+  setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::kReference : VelocitySource::kImu);
+  setup.axes = options.axes;
+  setup.signals = &signals;
+  setup.ignore_bands = options.ignore_bands;
+  setup.lowpass_hz = options.lowpass_hz;
+  if (options.max_steps < 0) throw std::invalid_argument("diagnose: the number of steps cannot be negative");
+
+  const estimator::Windows windows = estimator::resolve_windows(signals.t, options.train, options.validate);
+  const Range train = range_of(signals, windows.train), validation = range_of(signals, windows.validate);
+  // analyse_residual's minimum, and enough to fit anything.
+  constexpr std::size_t kMinSamples = 64;
+  if (train.count < kMinSamples || validation.count < kMinSamples)
+    throw std::invalid_argument("diagnose: the training and validation windows need at least 64 samples each");
+  const std::size_t span_lag =
+      static_cast<std::size_t>(std::lround(kCorrelationSpanS * sample_rate_hz(signals.t)));
+
+  Diagnosis out;
+  out.session = options.session;
+  out.model = options.model == BaseModel::kPaper ? "paper" : "full";
+  for (int axis : setup.axes) out.axes.push_back(axis_name(axis));
+  out.velocity_source = setup.velocity == VelocitySource::kReference ? "reference" : "imu";
+  out.train_start = windows.train.start, out.train_end = windows.train.end;
+  out.validate_start = windows.validate.start, out.validate_end = windows.validate.end;
+  out.significance_rule = describe_rule(options);
+
+  const Model base_model(signals, setup);
+  State current = settle(base_model, fit(base_model, base_model.base_start(train), train), train, validation);
+  out.base = current.summary;
+  out.base_residual = analyse(base_model, current, validation, options);
+  const AxisValues base_validation_residual = current.validation_residual;
+
+  for (int step = 0; step < options.max_steps; ++step) {
+    const std::vector<std::string> in_model = names_of(current.effects);
+    std::vector<CandidateTrial> trials;
+    std::vector<std::optional<State>> fitted;
+    for (const auto& effect : effect_library()) {
+      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) != current.effects.end()) continue;
+      CandidateTrial trial;
+      trial.effect = std::string(effect->name());
+      std::optional<State> candidate;
+      if (auto why = effect->why_not(setup, in_model)) {
+        trial.skipped = *why;
+      } else {
+        try {
+          std::vector<const Effect*> effects = current.effects;
+          effects.push_back(effect.get());
+          const Model model(signals, setup, effects);
+          // Warm start: the current values, then the new effect's own start.
+          std::vector<double> start = current.fit.values;
+          const std::size_t offset = start.size();
+          for (std::size_t i = offset; i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+          const std::span<const double> train_t(signals.t.data() + train.first, train.count);
+          const StartContext context{setup, train_t, current.train_residual};
+          if (auto why = effect->start(context, std::span<double>(start).subspan(offset))) {
+            trial.skipped = *why;
+          } else {
+            FitOutcome best = fit(model, start, train);
+            for (const std::vector<double>& more : effect->more_starts(std::span<const double>(start).subspan(offset))) {
+              std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(offset));
+              FitOutcome other = fit(model, start, train);
+              if (other.convergence.back() < best.convergence.back()) best = std::move(other);
+            }
+            candidate = settle(model, std::move(best), train, validation);
+            trial.rmse_train = candidate->summary.rmse_train;
+            trial.rmse_validation = candidate->summary.rmse_validation;
+            double n_eff = 0.0;
+            for (const std::vector<double>& r : candidate->validation_residual) n_eff += effective_samples(r, span_lag);
+            const FTest test = validation_f_test(sum_of_squares(current.validation_residual),
+                                                 sum_of_squares(candidate->validation_residual),
+                                                 model.parameters().size() - offset, model.parameters().size(), n_eff);
+            trial.statistic = test.statistic;
+            trial.p_value = test.p_value;
+          }
+        } catch (const std::exception& e) {
+          trial.skipped = std::string("failed to fit: ") + e.what();
+          candidate.reset();
+        }
+      }
+      trials.push_back(trial);
+      fitted.push_back(std::move(candidate));
+    }
+    const std::size_t tried = static_cast<std::size_t>(
+        std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
+    const double rmse_before = current.summary.rmse_validation;
+    for (CandidateTrial& t : trials) {
+      if (!t.skipped.empty()) continue;
+      const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
+      t.significant = improves && t.p_value < options.significance / static_cast<double>(tried);
+    }
+    // Best validation RMSE first; the skipped after, in library order.
+    std::vector<std::size_t> order(trials.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const bool a_tried = trials[a].skipped.empty(), b_tried = trials[b].skipped.empty();
+      if (a_tried != b_tried) return a_tried;
+      return a_tried && trials[a].rmse_validation < trials[b].rmse_validation;
+    });
+    std::vector<CandidateTrial> sorted;
+    for (std::size_t i : order) sorted.push_back(trials[i]);
+
+    if (tried == 0 || !trials[order.front()].significant) {
+      out.last_candidates = std::move(sorted);
+      break;
+    }
+    Step s;
+    s.effect = trials[order.front()].effect;
+    s.rmse_train_before = current.summary.rmse_train;
+    s.rmse_validation_before = rmse_before;
+    current = std::move(*fitted[order.front()]);
+    s.fit = current.summary;
+    s.params = current.summary.effect_params.back();
+    s.candidates = std::move(sorted);
+    const Model model(signals, setup, current.effects);
+    s.residual = analyse(model, current, validation, options);
+    out.steps.push_back(std::move(s));
+  }
+
+  out.final = current.summary;
+  out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
+  out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
+                                   [](const ResidualAnalysis& a) { return a.white; });
+  for (std::size_t i = 0; i < out.final_residual.size(); ++i) {
+    for (Unexplained& u : unexplained_structure(out.final_residual[i], out.axes[i])) out.unexplained.push_back(u);
+  }
+
+  // The plots' series: the final model's frame, with each model's prediction as measured - residual.
+  const Model final_model(signals, setup, current.effects);
+  const Evaluation final_eval = final_model.evaluate(current.fit.values, validation);
+  for (std::size_t i = 0; i < setup.axes.size(); ++i) {
+    AxisSeries a;
+    a.axis = out.axes[i];
+    a.t.assign(signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first),
+               signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first + validation.count));
+    a.measured = final_eval.measured[i];
+    a.base_model.resize(validation.count);
+    a.final_model.resize(validation.count);
+    for (std::size_t k = 0; k < validation.count; ++k) {
+      a.base_model[k] = a.measured[k] - base_validation_residual[i][k];
+      a.final_model[k] = a.measured[k] - current.validation_residual[i][k];
+    }
+    out.series.push_back(std::move(a));
+  }
+  return out;
+}
+
+}  // namespace imubridge::diagnose

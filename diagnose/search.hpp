@@ -1,0 +1,57 @@
+#pragma once
+// The greedy model search of `imubridge diagnose` (docs/effects.md): fit the base model on the training window, then
+// repeatedly try every effect of the library on top of the current model, refitting everything, and add the one
+// that lowers the VALIDATION error most, while it passes the significance rule; analyse the residual after each
+// step and report what structure remains.
+#include <cstddef>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "diagnose/diagnosis.hpp"
+#include "diagnose/effects/effect.hpp"
+#include "estimator/imu_series.hpp"
+#include "estimator/params.hpp"
+
+namespace imubridge::diagnose {
+
+struct DiagnoseOptions {
+  BaseModel model = BaseModel::kPaper;
+  std::optional<VelocitySource> velocity;  // default: the reference when the series has one, else the IMU
+  std::vector<int> axes{0, 1};             // 0 = x, 1 = y
+  std::optional<estimator::TimeWindow> train;     // default [0, 33) s, the paper's split
+  std::optional<estimator::TimeWindow> validate;  // default from the end of `train` to the end of the data
+  std::vector<std::pair<double, double>> ignore_bands;  // Hz: no vibration is fitted there, no line reported
+  // > 0: compare model and measurement below this frequency only (docs/effects.md, "Band limit"), Hz; everything
+  // above it joins the ignored bands.
+  double lowpass_hz = 0.0;
+  int max_steps = 8;
+  // The significance rule: the F-test on the validation residual sums of squares (validation_f_test) at
+  // `significance` divided by the number of candidates tried (Bonferroni), and a validation RMSE lower by at least
+  // `min_improvement` (relative), so that gains too small to matter do not pile up on long flights.
+  double significance = 0.01;
+  double min_improvement = 0.02;
+  std::string session;  // how the report names the data
+};
+
+// Throws std::invalid_argument for an invalid series, bad options (no axis, a window without data, a reference
+// velocity without a reference) or too few samples in a window (the residual analysis needs 64).
+Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& options);
+
+// The significance rule's test (docs/effects.md): an F-test on the validation window's residual sums of squares,
+//   F = ((rss_before - rss_after) / q) / (rss_after / (n_eff - p)),
+// q the parameters the candidate adds (at least 1), p all of the candidate model's, n_eff the validation residuals'
+// effective count (effective_samples). p_value from the F(q, n_eff - p) distribution; 1 when rss_after >= rss_before.
+struct FTest {
+  double statistic = 0.0;
+  double p_value = 1.0;
+};
+FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff);
+
+// n / (1 + 2 sum_k rho_k): the number of independent samples a correlated series is worth (Bartlett), with the sum
+// over the initial run of positive autocorrelations up to max_lag. Between 1 and n.
+double effective_samples(std::span<const double> x, std::size_t max_lag);
+
+}  // namespace imubridge::diagnose
