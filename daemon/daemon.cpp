@@ -112,7 +112,8 @@ void configure_logging(const Config& config) {
 
 struct Daemon::Recording {
   Recording(const fs::path& file, const StoreConfig& config)
-      : path(file), store(file, store::StoreOptions{.commit_interval = config.commit_interval}) {}
+      : path(file), store(file, store::StoreOptions{.commit_interval = config.commit_interval,
+                                               .background_checkpoint = std::chrono::seconds(1)}) {}
   fs::path path;
   store::Store store;
   std::int64_t session = 0, run = 0;

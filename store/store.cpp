@@ -105,7 +105,12 @@ Database open_database(const std::filesystem::path& path, bool read_only) {
 }  // namespace
 
 Store::Store(const std::filesystem::path& path, Options options)
-    : db_(open_database(path, options.read_only)), options_(options) {}
+    : db_(open_database(path, options.read_only)), options_(options) {
+  if (!options.read_only && options.background_checkpoint.count() > 0) {
+    db_.exec("PRAGMA wal_autocheckpoint = 0");  // the checkpointer's job now
+    checkpointer_ = std::make_unique<WalCheckpointer>(path, options.background_checkpoint);
+  }
+}
 
 Store::~Store() {
   try {

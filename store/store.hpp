@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <set>
 #include <span>
@@ -20,6 +21,7 @@
 #include "store/error.hpp"
 #include "store/records.hpp"
 #include "store/sqlite.hpp"
+#include "store/wal_checkpointer.hpp"
 
 namespace imubridge::store {
 
@@ -30,6 +32,9 @@ struct StoreOptions {
   std::size_t max_batch_rows = 100000;
   // For readers (replay, export): SQLite opens the file read-only, so the Store cannot change it; writes throw.
   bool read_only = false;
+  // > 0: checkpoint the write-ahead log from a thread of its own at this interval (wal_checkpointer.hpp) instead of
+  // inside whichever commit crosses SQLite's threshold, so a recorder's commits never wait for an fsync.
+  std::chrono::milliseconds background_checkpoint{0};
 };
 
 class Store {
@@ -104,6 +109,7 @@ class Store {
 
   Database db_;
   Options options_;
+  std::unique_ptr<WalCheckpointer> checkpointer_;  // after db_: stopped before the main connection closes
   std::size_t pending_rows_ = 0;
   std::optional<std::chrono::steady_clock::time_point> last_due_commit_;
   std::vector<PendingEstimate> pending_estimates_;

@@ -16,6 +16,7 @@
 #include <list>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "store/schema.hpp"
@@ -301,6 +302,27 @@ TEST_F(StoreTest, EstimatesAndReferenceRoundTripBitExact) {
 
 // How many samples a separate reader sees, i.e. how many are committed.
 std::string committed_samples(const fs::path& path) { return query(path, "SELECT count(*) FROM samples"); }
+
+TEST_F(StoreTest, BackgroundCheckpointsMoveTheLogIntoTheFileWhileTheRecorderWrites) {
+  constexpr std::uint64_t kSamples = 20000;
+  {
+    Store store(path_, {.background_checkpoint = 20ms});
+    const std::int64_t session = store.begin_session(kLive);
+    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    const auto size_before = fs::file_size(path_);
+    for (std::uint64_t i = 0; i < kSamples; ++i) store.append_sample(session, sample(link, i));
+    store.commit();
+    // SQLite's own checkpoints are off: only the background thread can grow the main file while the store is open.
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (fs::file_size(path_) < size_before + 200'000 && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(10ms);
+    EXPECT_GT(fs::file_size(path_), size_before + 200'000) << "nothing was checkpointed";
+    store.append_sample(session, sample(link, kSamples));  // the writer goes on after a checkpoint
+    store.commit();
+  }
+  EXPECT_EQ(committed_samples(path_), std::to_string(kSamples + 1));
+  EXPECT_EQ(query(path_, "PRAGMA integrity_check"), "ok");
+}
 
 TEST_F(StoreTest, CommitIfDueWaitsForTheIntervalSinceItsLastCommit) {
   Store store(path_, {.commit_interval = 200ms});
