@@ -4,6 +4,8 @@
 //            (r, beta, alpha, mu), agile pitch and some roll manoeuvres, 60 s at 200 Hz.
 //   center - the same flight with the IMU at the mass centre, axes aligned (the paper's section VIII).
 //   hover  - no manoeuvres, IMU at the mass centre, the paper's drag, 10 s.
+//   agile  - the paper's IMU pose and drag with tilts up to 0.6 rad (the paper's: 0.35), half of them in roll: the
+//            thrust varies by up to a fifth, and roll and pitch both turn the sensor.
 #include <cstdint>
 #include <numbers>
 #include <optional>
