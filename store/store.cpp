@@ -131,6 +131,10 @@ void Store::execute(Statement& statement, std::string_view what) {
 
 void Store::write(Statement& write, std::string_view what) {
   execute(write, what);
+  count_pending_row();
+}
+
+void Store::count_pending_row() {
   ++pending_rows_;
   if (pending_rows_ >= options_.max_batch_rows) commit();
 }
@@ -274,9 +278,8 @@ void Store::append_estimate(std::int64_t run, const Estimate& e) {
     return;
   }
   pending_estimates_.push_back({run, e});
-  ++pending_rows_;
+  count_pending_row();  // may commit, which flushes every waiting row
   if (pending_estimates_.size() == kEstimateBatchRows) flush_estimates();
-  if (pending_rows_ >= options_.max_batch_rows) commit();
 }
 
 void Store::flush_estimates() {

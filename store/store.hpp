@@ -101,6 +101,8 @@ class Store {
   void execute(Statement& statement, std::string_view what);
   // execute() for one appended row, counted in the batch.
   void write(Statement& write, std::string_view what);
+  // One more row in the open batch; commits when the batch is full.
+  void count_pending_row();
   // Writes the estimates waiting in memory, in the order they were appended.
   void flush_estimates();
   // Inserts a row others will refer to, commits, and returns its id.

@@ -34,28 +34,17 @@ WalCheckpointer::~WalCheckpointer() {
   sqlite3_close(db_);
 }
 
-std::uint64_t WalCheckpointer::checkpoints() const {
-  const std::lock_guard lock(mutex_);
-  return checkpoints_;
-}
-
-std::string WalCheckpointer::last_error() const {
-  const std::lock_guard lock(mutex_);
-  return last_error_;
-}
-
 void WalCheckpointer::run() {
   std::unique_lock lock(mutex_);
   while (!wake_.wait_for(lock, interval_, [this] { return stopping_; })) {
     lock.unlock();
     const int rc = sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
     const std::string error = rc == SQLITE_OK || rc == SQLITE_BUSY ? "" : sqlite3_errmsg(db_);
-    lock.lock();
-    ++checkpoints_;
     // Said once per new failure, not every second: the recorder's own writes report a full disk as it happens.
     if (!error.empty() && error != last_error_)
       std::fprintf(stderr, "imubridge store: %s: background checkpoint failed: %s\n", name_.c_str(), error.c_str());
     last_error_ = error;
+    lock.lock();
   }
 }
 

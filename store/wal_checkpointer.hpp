@@ -23,21 +23,17 @@ class WalCheckpointer {
   WalCheckpointer(const WalCheckpointer&) = delete;
   WalCheckpointer& operator=(const WalCheckpointer&) = delete;
 
-  // Checkpoints run so far, and the last one's error ("" when it succeeded): a failure (disk full) leaves the log
-  // growing but every committed row safe in it.
-  std::uint64_t checkpoints() const;
-  std::string last_error() const;
-
  private:
   void run();
 
   sqlite3* db_ = nullptr;
   std::string name_;
   std::chrono::milliseconds interval_;
-  mutable std::mutex mutex_;
+  std::mutex mutex_;
   std::condition_variable wake_;
   bool stopping_ = false;
-  std::uint64_t checkpoints_ = 0;
+  // The last checkpoint's error ("" when it succeeded), so a lasting failure is said once. A failure (disk full)
+  // leaves the log growing but every committed row safe in it. Only the thread touches it.
   std::string last_error_;
   std::thread thread_;  // last: starts once everything above is ready
 };
