@@ -2,17 +2,16 @@
 // estimated and the estimates stored as a new run. Target: >= 500,000 samples/s on one core (CPU time).
 // BM_ReplayStageShares times each stage alone on the same flight and gives its share of the whole.
 #include <benchmark/benchmark.h>
-#include <stdlib.h>
 #include <time.h>
 
 #include <chrono>
 #include <cmath>
-#include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "bench/scratch_dir.hpp"
 #include "pipeline/estimation_stage.hpp"
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/link_recorder.hpp"
@@ -24,23 +23,9 @@
 namespace imubridge::replay {
 namespace {
 
-namespace fs = std::filesystem;
-
 constexpr double kFlightSeconds = 60;  // 12,000 samples at 200 Hz
 
-class ScratchDir {
- public:
-  ScratchDir() {
-    std::string pattern = (fs::temp_directory_path() / "imubridge-replay-bench-XXXXXX").string();
-    if (mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
-    path_ = pattern;
-  }
-  ~ScratchDir() { fs::remove_all(path_); }
-  fs::path database() const { return path_ / "bench.db"; }
-
- private:
-  fs::path path_;
-};
+using bench::ScratchDir;
 
 estimator::ModelParams paper_params() {  // identified parameters: the estimator does its full work
   estimator::ModelParams p;

@@ -5,13 +5,13 @@
 // measurement behind Store::kEstimateBatchRows.
 #include <benchmark/benchmark.h>
 #include <sqlite3.h>
-#include <stdlib.h>
 
 #include <chrono>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include "bench/scratch_dir.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::store {
@@ -21,20 +21,7 @@ namespace fs = std::filesystem;
 
 constexpr int kSamplesPerIteration = 10000;
 
-// A scratch directory for one benchmark's database, removed afterwards.
-class ScratchDir {
- public:
-  ScratchDir() {
-    std::string pattern = (fs::temp_directory_path() / "imubridge-store-bench-XXXXXX").string();
-    if (mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
-    path_ = pattern;
-  }
-  ~ScratchDir() { fs::remove_all(path_); }
-  fs::path database() const { return path_ / "bench.db"; }
-
- private:
-  fs::path path_;
-};
+using bench::ScratchDir;
 
 // A full row, as the imubridge frame gives it: SI values, magnetometer, temperature and raw counts.
 std::vector<protocol::Sample> samples(std::uint32_t link) {

@@ -27,29 +27,12 @@
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
 #include "tests/run_command.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace imubridge::test {
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
-
-// A fresh directory per test, removed afterwards.
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "imubridge_run_XXXXXX").string();
-    path_ = ::mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-
- private:
-  fs::path path_;
-};
 
 // Polls `done` until it holds, for at most `limit`; returns whether it did.
 inline bool eventually(const std::function<bool()>& done, std::chrono::milliseconds limit = 20s) {

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "daemon/outputs.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace imubridge::daemon {
 namespace {
@@ -91,17 +92,7 @@ class Subscriber {
   asio::streambuf buffer_;
 };
 
-class TempDir {
- public:
-  TempDir() : path_(std::filesystem::temp_directory_path() / ("imubridge-outputs-" + std::to_string(::getpid()))) {
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using test::TempDir;
 
 protocol::Sample sample(std::uint64_t seq) {
   return {.seq = seq, .device_time_us = 1'500'000 + 10'000 * static_cast<std::int64_t>(seq)};

@@ -6,7 +6,6 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <poll.h>
-#include <stdlib.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -16,6 +15,8 @@
 #include <thread>
 #include <vector>
 
+#include "tests/temp_dir.hpp"
+
 namespace imubridge::cli {
 namespace {
 
@@ -24,12 +25,6 @@ using namespace std::chrono_literals;
 
 class PtyTest : public ::testing::Test {
  protected:
-  PtyTest() {
-    std::string pattern = (fs::temp_directory_path() / "imubridge_pty_XXXXXX").string();
-    dir_ = ::mkdtemp(pattern.data());
-  }
-  ~PtyTest() override { fs::remove_all(dir_); }
-
   // A byte pattern that shows any loss, duplication or reordering.
   static std::vector<std::uint8_t> pattern(std::size_t size) {
     std::vector<std::uint8_t> bytes(size);
@@ -49,7 +44,7 @@ class PtyTest : public ::testing::Test {
     return got;
   }
 
-  fs::path dir_;
+  test::TempDir dir_;
 };
 
 TEST_F(PtyTest, DrainWaitsForASlowReaderSoClosingLosesNoByte) {
