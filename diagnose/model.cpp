@@ -330,13 +330,10 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   // 5. prediction
   for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_prediction(params_of(i), ctx, e.predicted);
   // The band limit: both sides alike, so the residual is the model's error inside the band.
-  if (setup_.lowpass_hz > 0.0 && range.count > 1) {
-    const std::vector<double>& t = signals().t;
-    const double rate_hz =
-        static_cast<double>(range.count - 1) / (t[range.first + range.count - 1] - t[range.first]);
+  if (setup_.lowpass_hz > 0.0) {
     for (std::size_t i = 0; i < axes; ++i) {
-      zero_phase_lowpass(e.measured[i], setup_.lowpass_hz, rate_hz);
-      zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, rate_hz);
+      zero_phase_lowpass(e.measured[i], setup_.lowpass_hz, signals().rate_hz);
+      zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, signals().rate_hz);
     }
   }
   return e;

@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "diagnose/residual_analysis.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/velocity.hpp"
 
@@ -32,6 +33,7 @@ Signals prepare_signals(const estimator::ImuSeries& series, double derivative_ha
   if (series.size() < 2) throw std::invalid_argument("diagnose: needs at least 2 samples");
   Signals s;
   s.t = series.t;
+  s.rate_hz = sample_rate_hz(s.t);
   s.gyro = series.gyro;
   s.accel = series.accel;
   s.gyro_rate = estimator::smoothed_derivative(s.t, s.gyro, derivative_half_window);

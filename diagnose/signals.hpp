@@ -22,6 +22,7 @@ struct ReferenceSignals {
 
 struct Signals {
   std::vector<double> t;                        // s
+  double rate_hz = 0.0;                         // sample rate: 1 / median step (sample_rate_hz)
   std::vector<Eigen::Vector3d> gyro;            // rad/s, IMU axes
   std::vector<Eigen::Vector3d> gyro_rate;       // rad/s^2, IMU axes (estimator::smoothed_derivative)
   std::vector<Eigen::Vector3d> accel;           // measured specific force, m/s^2, IMU axes
