@@ -1,35 +1,105 @@
 #include "daemon/outputs.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <stdexcept>
 
 namespace imubridge::daemon {
 namespace {
 
-using nlohmann::ordered_json;
+// The per-sample messages are written by hand: at 1 kHz, building and dumping a JSON tree per sample cost about a
+// tenth of the daemon's CPU (perf, docs/performance.md); the counters below stay nlohmann::json.
 
-ordered_json xyz(const std::array<double, 3>& v) { return {{"x", v[0]}, {"y", v[1]}, {"z", v[2]}}; }
-
-// Everything about a sample but its time and link, which the two outputs place differently.
-ordered_json measurement(const protocol::Sample& s, const store::Estimate* e) {
-  ordered_json j{{"seq", s.seq}, {"accel", xyz(s.accel)}, {"gyro", xyz(s.gyro)}};
-  if (s.has_mag) j["mag"] = xyz(s.mag);
-  if (s.has_temperature) j["temperature"] = s.temperature_c;
-  if (e != nullptr) {
-    j["estimate"] = {{"seq", e->seq},
-                     {"fx", e->fx},
-                     {"fy", e->fy},
-                     {"vx", e->vx},
-                     {"vy", e->vy},
-                     {"sx", std::sqrt(e->var_vx)},
-                     {"sy", std::sqrt(e->var_vy)}};
+// Shortest text that reads back to the same double (std::to_chars); NaN and infinity, which JSON lacks, as null.
+// A whole number gets ".0", so that parsers read it as a double: "-0" would come back as the integer 0, losing the sign.
+void append_number(std::string& out, double value) {
+  if (!std::isfinite(value)) {
+    out += "null";
+    return;
   }
-  return j;
+  char text[32];
+  char* const end = std::to_chars(text, text + sizeof text, value).ptr;
+  out.append(text, end);
+  if (std::find_if(text, end, [](char c) { return c == '.' || c == 'e'; }) == end) out += ".0";
 }
 
-// NaN and infinity are written as null; bytes that are not UTF-8 (in a link name) as U+FFFD instead of throwing.
-std::string dump(const ordered_json& j) { return j.dump(-1, ' ', false, ordered_json::error_handler_t::replace); }
+void append_number(std::string& out, std::uint64_t value) {
+  char text[24];
+  out.append(text, std::to_chars(text, text + sizeof text, value).ptr);
+}
+
+// A JSON string. Link names are plain ASCII (the config checks), but this takes any bytes: quotes, backslashes and
+// control characters are escaped, and bytes beyond ASCII become U+FFFD so the message is valid UTF-8 whatever comes.
+void append_string(std::string& out, std::string_view text) {
+  out += '"';
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte == '"' || byte == '\\') {
+      out += '\\';
+      out += c;
+    } else if (byte < 0x20) {
+      constexpr char kHex[] = "0123456789abcdef";
+      out += "\\u00";
+      out += kHex[byte >> 4];
+      out += kHex[byte & 0xf];
+    } else if (byte >= 0x80) {
+      out += "\\ufffd";
+    } else {
+      out += c;
+    }
+  }
+  out += '"';
+}
+
+// `,"key":` — every key follows another member here, and keys are literals that need no escaping.
+void append_key(std::string& out, std::string_view key) {
+  out += ",\"";
+  out += key;
+  out += "\":";
+}
+
+void append_xyz(std::string& out, std::string_view key, const std::array<double, 3>& v) {
+  append_key(out, key);
+  out += "{\"x\":";
+  append_number(out, v[0]);
+  out += ",\"y\":";
+  append_number(out, v[1]);
+  out += ",\"z\":";
+  append_number(out, v[2]);
+  out += '}';
+}
+
+// Everything about a sample but its time and link, which the two outputs place differently: the members of one
+// object, without its braces.
+void append_measurement(std::string& out, const protocol::Sample& s, const store::Estimate* e) {
+  out += "\"seq\":";
+  append_number(out, s.seq);
+  append_xyz(out, "accel", s.accel);
+  append_xyz(out, "gyro", s.gyro);
+  if (s.has_mag) append_xyz(out, "mag", s.mag);
+  if (s.has_temperature) {
+    append_key(out, "temperature");
+    append_number(out, s.temperature_c);
+  }
+  if (e == nullptr) return;
+  append_key(out, "estimate");
+  out += "{\"seq\":";
+  append_number(out, e->seq);
+  append_key(out, "fx");
+  append_number(out, e->fx);
+  append_key(out, "fy");
+  append_number(out, e->fy);
+  append_key(out, "vx");
+  append_number(out, e->vx);
+  append_key(out, "vy");
+  append_number(out, e->vy);
+  append_key(out, "sx");
+  append_number(out, std::sqrt(e->var_vx));
+  append_key(out, "sy");
+  append_number(out, std::sqrt(e->var_vy));
+  out += '}';
+}
 
 }  // namespace
 
@@ -86,16 +156,27 @@ void Outputs::publish(std::string_view link, const protocol::Sample& sample, con
   if (!plotjuggler_ && line_streams_.empty()) return;
   // device_time_us / 1e6 rather than * 1e-6: the quotient is correctly rounded, so 1500000 us is exactly 1.5 s.
   const double timestamp = static_cast<double>(sample.device_time_us) / 1e6;
-  ordered_json body = measurement(sample, estimate_or_null);
   if (!line_streams_.empty()) {
-    ordered_json line{{"timestamp", timestamp}, {"link", link}};
-    line.update(body);
-    const auto message = std::make_shared<const std::string>(dump(line) + '\n');
+    std::string line = "{\"timestamp\":";
+    append_number(line, timestamp);
+    append_key(line, "link");
+    append_string(line, link);
+    line += ',';
+    append_measurement(line, sample, estimate_or_null);
+    line += "}\n";
+    const auto message = std::make_shared<const std::string>(std::move(line));
     for (const auto& stream : line_streams_) stream->send(message);
   }
   if (plotjuggler_) {
     // PlotJuggler names a series by its path and cannot split one by a string field, so the link is a path level.
-    const std::string datagram = dump(ordered_json{{"timestamp", timestamp}, {link, std::move(body)}});
+    std::string& datagram = plotjuggler_->datagram;  // reused: its capacity stays, so no allocation per sample
+    datagram = "{\"timestamp\":";
+    append_number(datagram, timestamp);
+    datagram += ',';
+    append_string(datagram, link);
+    datagram += ":{";
+    append_measurement(datagram, sample, estimate_or_null);
+    datagram += "}}";
     boost::system::error_code ec;
     plotjuggler_->socket.send_to(boost::asio::buffer(datagram), plotjuggler_->target, 0, ec);
     ++(ec ? plotjuggler_->datagrams_dropped : plotjuggler_->datagrams_sent);

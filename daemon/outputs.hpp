@@ -49,6 +49,7 @@ class Outputs {
     boost::asio::ip::udp::socket socket;
     boost::asio::ip::udp::endpoint target;
     std::uint64_t datagrams_sent = 0, datagrams_dropped = 0;
+    std::string datagram;  // the message being sent, kept so its buffer is reused
   };
 
   boost::asio::io_context& io_;

@@ -144,6 +144,31 @@ TEST(Outputs, PlotJugglerGetsOneDatagramPerSampleWithTheLinkAsAPathLevel) {
   EXPECT_EQ(outputs.counters()["plotjuggler"]["datagrams_sent"], 2);
 }
 
+// The messages are written by hand (outputs.cpp): every double must read back to the same bits, and a link name with
+// any bytes must still make valid JSON (quotes and control characters escaped, bytes beyond ASCII as U+FFFD).
+TEST(Outputs, NumbersReadBackExactlyAndAnyLinkNameMakesValidJson) {
+  asio::io_context io;
+  UdpReceiver plotjuggler(io);
+  Outputs outputs(io, outputs_config(plotjuggler.endpoint()));
+  const std::array<double, 3> accel{1.0 / 3.0, -0.0, std::numeric_limits<double>::denorm_min()};
+  const std::array<double, 3> gyro{1e300, -123456789.125, 0.1 + 0.2};
+  const protocol::Sample s{.seq = std::numeric_limits<std::uint64_t>::max(), .accel = accel, .gyro = gyro};
+  const std::string link = std::string("a\"b\\c\n") + '\x01' + "\xff/x";
+  outputs.publish(link, s, nullptr);
+
+  const json j = json::parse(plotjuggler.receive().value());  // throws, failing the test, if not valid JSON
+  ASSERT_EQ(j.size(), 2u);
+  const json& body = j.at("a\"b\\c\n\u0001\ufffd/x");
+  EXPECT_EQ(body.at("seq").get<std::uint64_t>(), s.seq);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const char* axis[] = {"x", "y", "z"};
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(body["accel"][axis[i]].get<double>()), std::bit_cast<std::uint64_t>(accel[i]))
+        << "accel." << axis[i];
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(body["gyro"][axis[i]].get<double>()), std::bit_cast<std::uint64_t>(gyro[i]))
+        << "gyro." << axis[i];
+  }
+}
+
 TEST(Outputs, LineStreamsOverTcpAndUnixSocketsDeliverEveryLine) {
   asio::io_context io;
   TempDir dir;
