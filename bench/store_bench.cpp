@@ -2,7 +2,7 @@
 // loop of the same INSERT with one prepared statement in one transaction, into the same table of the same file.
 // Target: Store >= 500,000 samples/s and >= 0.7 of the bare loop.
 // Estimates (what a replay writes): through the Store, and bare INSERTs of 1 to 128 rows per statement, the
-// measurement behind Store::kEstimateBatchRows.
+// measurement behind Store::kRowsPerStatement.
 #include <benchmark/benchmark.h>
 #include <sqlite3.h>
 

@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -69,19 +70,101 @@ std::optional<std::int64_t> column_optional_int(const Statement& row, int column
 std::int64_t seq_to_column(std::uint64_t seq) { return static_cast<std::int64_t>(seq); }
 std::uint64_t seq_from_column(std::int64_t value) { return static_cast<std::uint64_t>(value); }
 
-constexpr std::size_t kEstimateColumns = 10;  // run_id, link_id, seq and 7 values
+Statement& bind_optional_int(Statement& statement, int index, std::optional<std::int64_t> value);
 
-void bind_estimate(Statement& statement, int first, std::int64_t run, const Estimate& e) {
-  statement.bind_int(first, run).bind_int(first + 1, e.link_id).bind_int(first + 2, seq_to_column(e.seq));
+// SQLite stores a NaN as NULL, and a NULL reads back as the quiet NaN.
+double as_stored(double value) { return std::isnan(value) ? std::numeric_limits<double>::quiet_NaN() : value; }
+
+template <std::size_t N>
+std::array<double, N> as_stored(std::array<double, N> values) {
+  for (double& v : values) v = as_stored(v);
+  return values;
+}
+
+// Each waiting row as reading it back from its table gives it, for this Store's readers.
+Estimate as_stored(Estimate e) {
+  for (double* v : {&e.t_s, &e.fx, &e.fy, &e.vx, &e.vy, &e.var_vx, &e.var_vy}) *v = as_stored(*v);
+  return e;
+}
+
+protocol::Sample as_stored(protocol::Sample s) {
+  s.accel = as_stored(s.accel);
+  s.gyro = as_stored(s.gyro);
+  // A group of columns that is all NULL reads back as absent (column_optional_reals).
+  s.mag = as_stored(s.mag);
+  if (!s.has_mag || std::all_of(s.mag.begin(), s.mag.end(), [](double v) { return std::isnan(v); })) {
+    s.has_mag = false;
+    s.mag = {};
+  }
+  if (!s.has_temperature || std::isnan(s.temperature_c)) {
+    s.has_temperature = false;
+    s.temperature_c = 0.0;
+  }
+  if (!s.has_raw) s.raw = {};
+  return s;
+}
+
+// Each table's columns in its INSERT's order, from `first`.
+void bind_row(Statement& statement, int first, const detail::WaitingChunk& row) {
+  const Chunk& c = row.chunk;
+  statement.bind_int(first, row.session)
+      .bind_int(first + 1, c.link_id)
+      .bind_text(first + 2, c.direction == Direction::tx ? "tx" : "rx")
+      .bind_int(first + 3, c.recv_mono_ns)
+      .bind_int(first + 4, c.recv_wall_ns)
+      .bind_blob(first + 5, c.bytes);
+}
+
+void bind_row(Statement& statement, int first, const detail::WaitingSample& row) {
+  const protocol::Sample& s = row.sample;
+  statement.bind_int(first, row.session)
+      .bind_int(first + 1, s.link_id)
+      .bind_int(first + 2, seq_to_column(s.seq))
+      .bind_int(first + 3, s.device_time_us)
+      .bind_int(first + 4, s.recv_mono_ns);
+  bind_reals(statement, first + 5, s.accel);
+  bind_reals(statement, first + 8, s.gyro);
+  if (s.has_mag) {
+    bind_reals(statement, first + 11, s.mag);
+  } else {
+    bind_nulls(statement, first + 11, 3);
+  }
+  if (s.has_temperature) {
+    statement.bind_real(first + 14, s.temperature_c);
+  } else {
+    statement.bind_null(first + 14);
+  }
+  if (s.has_raw) {
+    statement.bind_blob(first + 15, row.raw);
+  } else {
+    statement.bind_null(first + 15);
+  }
+}
+
+void bind_row(Statement& statement, int first, const detail::WaitingEstimate& row) {
+  const Estimate& e = row.estimate;
+  statement.bind_int(first, row.run).bind_int(first + 1, e.link_id).bind_int(first + 2, seq_to_column(e.seq));
   bind_reals(statement, first + 3, std::array{e.t_s, e.fx, e.fy, e.vx, e.vy, e.var_vx, e.var_vy});
 }
 
-// An estimate as reading it back from its row gives it: every NaN is stored as NULL and reads as the quiet NaN.
-Estimate as_stored(Estimate e) {
-  for (double* v : {&e.t_s, &e.fx, &e.fy, &e.vx, &e.vy, &e.var_vx, &e.var_vy}) {
-    if (std::isnan(*v)) *v = std::numeric_limits<double>::quiet_NaN();
-  }
-  return e;
+// The (parent, link) pair whose first row is written at once.
+std::pair<std::int64_t, std::int64_t> parent_and_link(const detail::WaitingChunk& row) {
+  return {row.session, row.chunk.link_id};
+}
+std::pair<std::int64_t, std::int64_t> parent_and_link(const detail::WaitingSample& row) {
+  return {row.session, row.sample.link_id};
+}
+std::pair<std::int64_t, std::int64_t> parent_and_link(const detail::WaitingEstimate& row) {
+  return {row.run, row.estimate.link_id};
+}
+
+std::string insert_sql(std::string_view insert_into, std::size_t columns, std::size_t rows) {
+  std::string row = "(?";
+  for (std::size_t i = 1; i < columns; ++i) row += ", ?";
+  row += ")";
+  std::string sql = "INSERT INTO " + std::string(insert_into) + " VALUES " + row;
+  for (std::size_t i = 1; i < rows; ++i) sql += ", " + row;
+  return sql;
 }
 
 Statement& bind_optional_int(Statement& statement, int index, std::optional<std::int64_t> value) {
@@ -151,7 +234,7 @@ void Store::fail(const StoreError& error, std::string_view what) {
   // A constraint failure undoes only the offending statement: the batch is still good and stays open.
   if (error.sqlite_code() == SQLITE_CONSTRAINT && db_.in_transaction()) throw StoreError(message, error.sqlite_code());
   db_.rollback();
-  pending_estimates_.clear();  // they were part of the batch
+  drop_waiting();  // they were part of the batch
   if (pending_rows_ > 0) {
     message += "; rolled back the " + std::to_string(pending_rows_) +
                " rows appended since the last commit, earlier data is intact";
@@ -162,7 +245,7 @@ void Store::fail(const StoreError& error, std::string_view what) {
 
 bool Store::commit_if_due(std::chrono::steady_clock::time_point now) {
   // Not pending_rows_: a rejected first row leaves an empty batch open.
-  if (!db_.in_transaction() && pending_estimates_.empty()) return false;
+  if (!db_.in_transaction() && !anything_waiting()) return false;
   if (last_due_commit_ && now - *last_due_commit_ < options_.commit_interval) return false;
   commit();
   last_due_commit_ = now;
@@ -170,7 +253,7 @@ bool Store::commit_if_due(std::chrono::steady_clock::time_point now) {
 }
 
 void Store::commit() {
-  flush_estimates();
+  flush_all();
   if (!db_.in_transaction()) return;
   try {
     commit_.step();
@@ -190,6 +273,7 @@ std::int64_t Store::begin_session(const SessionInfo& info) {
 }
 
 void Store::end_session(std::int64_t session, std::int64_t ended_wall_ns) {
+  flush_all();  // so that changes() below counts the UPDATE, not a burst of waiting rows
   end_session_.bind_int(1, session).bind_int(2, ended_wall_ns);
   write(end_session_, "ending a session");
   commit();  // leaves changes() alone: it counts the UPDATE's rows
@@ -204,40 +288,17 @@ std::int64_t Store::add_link(std::int64_t session, std::string_view name, std::s
 
 void Store::append_chunk(std::int64_t session, std::int64_t link, Direction direction, std::int64_t recv_mono_ns,
                          std::int64_t recv_wall_ns, std::span<const std::uint8_t> bytes) {
-  insert_chunk_.bind_int(1, session)
-      .bind_int(2, link)
-      .bind_text(3, direction == Direction::tx ? "tx" : "rx")
-      .bind_int(4, recv_mono_ns)
-      .bind_int(5, recv_wall_ns)
-      .bind_blob(6, bytes);
-  write(insert_chunk_, "appending a chunk");
+  append_waiting(chunks_, detail::WaitingChunk{.session = session,
+                                               .chunk = {.link_id = link,
+                                                         .direction = direction,
+                                                         .recv_mono_ns = recv_mono_ns,
+                                                         .recv_wall_ns = recv_wall_ns,
+                                                         .bytes = {bytes.begin(), bytes.end()}}});
 }
 
 void Store::append_sample(std::int64_t session, const protocol::Sample& sample) {
-  insert_sample_.bind_int(1, session)
-      .bind_int(2, sample.link_id)
-      .bind_int(3, seq_to_column(sample.seq))
-      .bind_int(4, sample.device_time_us)
-      .bind_int(5, sample.recv_mono_ns);
-  bind_reals(insert_sample_, 6, sample.accel);
-  bind_reals(insert_sample_, 9, sample.gyro);
-  if (sample.has_mag) {
-    bind_reals(insert_sample_, 12, sample.mag);
-  } else {
-    bind_nulls(insert_sample_, 12, 3);
-  }
-  if (sample.has_temperature) {
-    insert_sample_.bind_real(15, sample.temperature_c);
-  } else {
-    insert_sample_.bind_null(15);
-  }
-  const auto raw = encode_raw(sample.raw);  // bound without a copy: lives until write() has stepped
-  if (sample.has_raw) {
-    insert_sample_.bind_blob(16, raw);
-  } else {
-    insert_sample_.bind_null(16);
-  }
-  write(insert_sample_, "appending a sample");
+  static_assert(std::tuple_size_v<decltype(detail::WaitingSample::raw)> == kRawBytes);
+  append_waiting(samples_, detail::WaitingSample{.session = session, .sample = sample, .raw = encode_raw(sample.raw)});
 }
 
 void Store::append_event(std::int64_t session, const Event& event) {
@@ -260,58 +321,89 @@ std::int64_t Store::begin_run(std::int64_t session, const RunInfo& info) {
   return insert_committed(insert_run_, "starting a run");
 }
 
-std::string Store::insert_estimates_sql(std::size_t rows) {
-  std::string row = "(?";
-  for (std::size_t i = 1; i < kEstimateColumns; ++i) row += ", ?";
-  row += ")";
-  std::string sql = "INSERT INTO estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy) VALUES " + row;
-  for (std::size_t i = 1; i < rows; ++i) sql += ", " + row;
-  return sql;
+void Store::append_estimate(std::int64_t run, const Estimate& e) {
+  append_waiting(estimates_, detail::WaitingEstimate{.run = run, .estimate = e});
 }
 
-void Store::append_estimate(std::int64_t run, const Estimate& e) {
-  if (!accepted_run_links_.contains({run, e.link_id})) {
-    flush_estimates();  // the rows appended before it go first
-    bind_estimate(insert_estimate_, 1, run, e);
-    write(insert_estimate_, "appending an estimate");
-    accepted_run_links_.emplace(run, e.link_id);  // nothing deletes runs or links: later rows will be accepted too
+template <typename Row>
+Store::Table<Row>::Table(const Database& db, std::string_view insert_into, std::size_t columns, std::string_view what)
+    : one(db, insert_sql(insert_into, columns, 1)),
+      many(db, insert_sql(insert_into, columns, kRowsPerStatement)),
+      columns(columns),
+      what_one("appending a" + std::string(what.starts_with('e') ? "n " : " ") + std::string(what)),
+      what_many("appending " + std::string(what) + "s") {}
+
+template <typename Row>
+void Store::append_waiting(Table<Row>& table, Row row) {
+  const auto key = parent_and_link(row);
+  if (!table.accepted.contains(key)) {
+    flush(table);  // the rows appended before it go first
+    bind_row(table.one, 1, row);
+    write(table.one, table.what_one);
+    table.accepted.insert(key);  // nothing deletes sessions, runs or links: later rows will be accepted too
     return;
   }
-  pending_estimates_.push_back({run, e});
-  count_pending_row();  // may commit, which flushes every waiting row
-  if (pending_estimates_.size() == kEstimateBatchRows) flush_estimates();
+  table.waiting.push_back(std::move(row));
+  count_pending_row();  // may commit, which writes every waiting row
+  if (table.waiting.size() >= kMaxWaitingRows) flush(table);
 }
 
-void Store::flush_estimates() {
+template <typename Row>
+void Store::flush(Table<Row>& table) {
   std::optional<StoreError> refused;  // the first row the schema refused: thrown once the others are in
   std::size_t written = 0;
+  auto& rows = table.waiting;
   // Any failure but a refused row rolls the batch back, which drops these rows too (fail()) and ends the loops.
-  for (; pending_estimates_.size() - written >= kEstimateBatchRows; written += kEstimateBatchRows) {
-    for (std::size_t i = 0; i < kEstimateBatchRows; ++i) {
-      const auto& [run, e] = pending_estimates_[written + i];
-      bind_estimate(insert_estimates_, static_cast<int>(1 + i * kEstimateColumns), run, e);
+  for (; rows.size() - written >= kRowsPerStatement; written += kRowsPerStatement) {
+    for (std::size_t i = 0; i < kRowsPerStatement; ++i) {
+      bind_row(table.many, static_cast<int>(1 + i * table.columns), rows[written + i]);
     }
     try {
-      execute(insert_estimates_, "appending estimates");
+      execute(table.many, table.what_many);
     } catch (const StoreError& error) {
-      // Only a run or link deleted by another program gets here; row by row below, only its rows are refused.
+      // Only a parent or link deleted by another program gets here; row by row below, only its rows are refused.
       if (error.sqlite_code() != SQLITE_CONSTRAINT) throw;
       break;
     }
   }
-  for (; written < pending_estimates_.size(); ++written) {
-    const auto& [run, e] = pending_estimates_[written];
-    bind_estimate(insert_estimate_, 1, run, e);
+  for (; written < rows.size(); ++written) {
+    bind_row(table.one, 1, rows[written]);
     try {
-      execute(insert_estimate_, "appending an estimate");
+      execute(table.one, table.what_one);
     } catch (const StoreError& error) {
       if (error.sqlite_code() != SQLITE_CONSTRAINT) throw;
       --pending_rows_;
       if (!refused) refused = error;
     }
   }
-  pending_estimates_.clear();
+  rows.clear();
   if (refused) throw *refused;
+}
+
+void Store::flush_all() {
+  std::optional<StoreError> refused;  // every table is written before a refused row is reported
+  const auto flush_keeping_refusal = [&](auto& table) {
+    try {
+      flush(table);
+    } catch (const StoreError& error) {
+      if (error.sqlite_code() != SQLITE_CONSTRAINT) throw;
+      if (!refused) refused = error;
+    }
+  };
+  flush_keeping_refusal(chunks_);
+  flush_keeping_refusal(samples_);
+  flush_keeping_refusal(estimates_);
+  if (refused) throw *refused;
+}
+
+bool Store::anything_waiting() const noexcept {
+  return !chunks_.waiting.empty() || !samples_.waiting.empty() || !estimates_.waiting.empty();
+}
+
+void Store::drop_waiting() noexcept {
+  chunks_.waiting.clear();
+  samples_.waiting.clear();
+  estimates_.waiting.clear();
 }
 
 void Store::append_reference(std::int64_t session, const ReferenceRow& row) {
@@ -408,6 +500,9 @@ void Store::for_each_chunk(std::int64_t session, std::optional<std::int64_t> lin
     chunk.bytes.assign(bytes.begin(), bytes.end());
     visit(chunk);
   }
+  for (const auto& [waiting_session, c] : chunks_.waiting) {  // appended after every row above
+    if (waiting_session == session && (!link || c.link_id == *link)) visit(c);
+  }
 }
 
 void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
@@ -444,6 +539,9 @@ void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> li
     }
     visit(sample);
   }
+  for (const auto& w : samples_.waiting) {  // appended after every row above
+    if (w.session == session && (!link || w.sample.link_id == *link)) visit(as_stored(w.sample));
+  }
 }
 
 void Store::for_each_estimate(std::int64_t run, const std::function<void(const Estimate&)>& visit) const {
@@ -463,8 +561,8 @@ void Store::for_each_estimate(std::int64_t run, const std::function<void(const E
            .var_vx = var_vx,
            .var_vy = var_vy});
   }
-  for (const auto& [pending_run, e] : pending_estimates_) {  // appended after every row above
-    if (pending_run == run) visit(as_stored(e));
+  for (const auto& [waiting_run, e] : estimates_.waiting) {  // appended after every row above
+    if (waiting_run == run) visit(as_stored(e));
   }
 }
 

@@ -3,6 +3,7 @@
 // reference pose of the sessions recorded into it. Writes are batched in one open transaction committed at least
 // every commit_interval, so data is durable at most 200 ms (the default) after it was appended. A Store is used by
 // one thread at a time. Layout and example queries: docs/storage.md.
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -37,6 +38,25 @@ struct StoreOptions {
   std::chrono::milliseconds background_checkpoint{0};
 };
 
+namespace detail {
+
+// A row waiting for its burst, with what binding it needs: its parent (session or run) and values that must
+// outlive the bind until the statement has stepped (a chunk's bytes, a sample's encoded raw counts).
+struct WaitingChunk {
+  std::int64_t session;
+  Chunk chunk;
+};
+struct WaitingSample {
+  std::int64_t session;
+  protocol::Sample sample;
+  std::array<std::uint8_t, 40> raw;  // Sample::raw as stored, little-endian int32s
+};
+struct WaitingEstimate {
+  std::int64_t run;
+  Estimate estimate;
+};
+}  // namespace detail
+
 class Store {
  public:
   using Options = StoreOptions;
@@ -56,14 +76,17 @@ class Store {
   void end_session(std::int64_t session, std::int64_t ended_wall_ns);
   std::int64_t add_link(std::int64_t session, std::string_view name, std::string_view protocol,
                         std::string_view device);
+  // Chunks, samples and estimates come at the sample rate, so they wait in memory and reach SQLite in bursts, in
+  // multi-row INSERTs of kRowsPerStatement: when kMaxWaitingRows of a table wait, or anything commits. A burst costs
+  // far less per row than the same rows written one at a time between the daemon's waits for the next frame, its
+  // caches cold (docs/performance.md). The first row of each (session, link), or (run, link), is written at once, so
+  // an unknown session, link or run fails in that call. Waiting rows count as appended (pending_rows), this Store's
+  // readers see them, and a commit writes them first: durability is the commit's, as for any row.
   void append_chunk(std::int64_t session, std::int64_t link, Direction direction, std::int64_t recv_mono_ns,
                     std::int64_t recv_wall_ns, std::span<const std::uint8_t> bytes);
   void append_sample(std::int64_t session, const protocol::Sample& sample);  // sample.link_id names the link
   void append_event(std::int64_t session, const Event& event);
   std::int64_t begin_run(std::int64_t session, const RunInfo& info);
-  // Estimates come at the sample rate, so they are written kEstimateBatchRows to a statement: the first row of each
-  // (run, link) is written at once, so an unknown run or link fails here; the others wait in memory until a batch is
-  // full or anything commits. They count as appended (pending_rows) and readers see them.
   void append_estimate(std::int64_t run, const Estimate& estimate);
   void append_reference(std::int64_t session, const ReferenceRow& row);
 
@@ -74,9 +97,12 @@ class Store {
   // Rows appended since the last commit.
   std::size_t pending_rows() const noexcept { return pending_rows_; }
 
-  // Rows per multi-row estimate INSERT: a statement's fixed cost (opening and closing its cursors, ending it) shared
-  // by this many rows halves the cost per row; more rows gain little (store_bench, docs/performance.md).
-  static constexpr std::size_t kEstimateBatchRows = 32;
+  // Rows per multi-row INSERT: a statement's fixed cost (opening and closing its cursors, ending it) shared by this
+  // many rows halves the cost per row; more rows gain little (store_bench, docs/performance.md).
+  static constexpr std::size_t kRowsPerStatement = 32;
+  // A table's waiting rows are written when this many wait: at 1 kHz a link's 200 ms of rows wait for the commit;
+  // faster sources (replay, many links) are written in bursts of this size, so memory stays bounded.
+  static constexpr std::size_t kMaxWaitingRows = 8 * kRowsPerStatement;
 
   // Reading, each in the order the rows were appended. A read-write Store also sees its own uncommitted rows.
   std::vector<Session> sessions() const;
@@ -92,9 +118,15 @@ class Store {
   void for_each_reference(std::int64_t session, const std::function<void(const ReferenceRow&)>& visit) const;
 
  private:
-  struct PendingEstimate {
-    std::int64_t run;
-    Estimate estimate;
+  // One table's waiting rows and its two INSERTs (one row, kRowsPerStatement rows).
+  template <typename Row>
+  struct Table {
+    Table(const Database& db, std::string_view insert_into, std::size_t columns, std::string_view what);
+    Statement one, many;
+    std::size_t columns;
+    std::string what_one, what_many;  // "appending a sample", "appending samples"
+    std::vector<Row> waiting;
+    std::set<std::pair<std::int64_t, std::int64_t>> accepted;  // (parent, link) pairs the schema took a row of
   };
 
   // Steps `statement` (bound, not yet stepped) inside the open batch; `what` names it in error messages.
@@ -103,8 +135,15 @@ class Store {
   void write(Statement& write, std::string_view what);
   // One more row in the open batch; commits when the batch is full.
   void count_pending_row();
-  // Writes the estimates waiting in memory, in the order they were appended.
-  void flush_estimates();
+  // Adds a row to its table's waiting rows, or writes it at once if it is its (parent, link)'s first.
+  template <typename Row>
+  void append_waiting(Table<Row>& table, Row row);
+  // Writes a table's waiting rows, in the order they were appended.
+  template <typename Row>
+  void flush(Table<Row>& table);
+  void flush_all();
+  bool anything_waiting() const noexcept;
+  void drop_waiting() noexcept;
   // Inserts a row others will refer to, commits, and returns its id.
   std::int64_t insert_committed(Statement& insert, std::string_view what);
   [[noreturn]] void fail(const StoreError& error, std::string_view what);
@@ -114,8 +153,6 @@ class Store {
   std::unique_ptr<WalCheckpointer> checkpointer_;  // after db_: stopped before the main connection closes
   std::size_t pending_rows_ = 0;
   std::optional<std::chrono::steady_clock::time_point> last_due_commit_;
-  std::vector<PendingEstimate> pending_estimates_;
-  std::set<std::pair<std::int64_t, std::int64_t>> accepted_run_links_;  // (run, link) pairs the schema took a row of
 
   Statement begin_{db_, "BEGIN IMMEDIATE"};
   Statement commit_{db_, "COMMIT"};
@@ -124,22 +161,20 @@ class Store {
                             "VALUES (?1, ?2, ?3, ?4, ?5)"};
   Statement end_session_{db_, "UPDATE sessions SET ended_wall_ns = ?2 WHERE id = ?1"};
   Statement insert_link_{db_, "INSERT INTO links (session_id, name, protocol, device) VALUES (?1, ?2, ?3, ?4)"};
-  Statement insert_chunk_{db_,
-                          "INSERT INTO chunks (session_id, link_id, direction, recv_mono_ns, recv_wall_ns, bytes) "
-                          "VALUES (?1, ?2, ?3, ?4, ?5, ?6)"};
-  Statement insert_sample_{db_,
-                           "INSERT INTO samples (session_id, link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, "
-                           "gx, gy, gz, mx, my, mz, temperature_c, raw) "
-                           "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16)"};
+  Table<detail::WaitingChunk> chunks_{db_, "chunks (session_id, link_id, direction, recv_mono_ns, recv_wall_ns, bytes)", 6,
+                              "chunk"};
+  Table<detail::WaitingSample> samples_{db_,
+                                "samples (session_id, link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, "
+                                "gz, mx, my, mz, temperature_c, raw)",
+                                16, "sample"};
   Statement insert_event_{db_,
                           "INSERT INTO events (session_id, link_id, mono_ns, wall_ns, kind, count, detail) "
                           "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"};
   Statement insert_run_{db_,
                         "INSERT INTO runs (session_id, kind, params, created_wall_ns, software_version) "
                         "VALUES (?1, ?2, ?3, ?4, ?5)"};
-  static std::string insert_estimates_sql(std::size_t rows);
-  Statement insert_estimate_{db_, insert_estimates_sql(1)};
-  Statement insert_estimates_{db_, insert_estimates_sql(kEstimateBatchRows)};
+  Table<detail::WaitingEstimate> estimates_{
+      db_, "estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy)", 10, "estimate"};
   Statement insert_reference_{db_,
                               "INSERT INTO reference (session_id, t_ns, px, py, pz, qw, qx, qy, qz, vx, vy, vz) "
                               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)"};

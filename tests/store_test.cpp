@@ -396,8 +396,9 @@ TEST_F(StoreTest, RejectedRowThrowsAndLeavesTheBatchAlone) {
   EXPECT_EQ(samples[1].seq, 2u);
 }
 
-// Estimates reach SQLite kEstimateBatchRows to a statement (store.hpp). Whatever the batching, they keep their append
-// order across runs and links, count as pending, are seen by their own Store at once and by everyone once committed.
+// Estimates reach SQLite in bursts, kRowsPerStatement to a statement (store.hpp). Whatever the batching, they keep their
+// append order across runs and links, count as pending, are seen by their own Store at once and by everyone once
+// committed.
 std::vector<Estimate> estimates_of(const Store& store, std::int64_t run) {
   std::vector<Estimate> estimates;
   store.for_each_estimate(run, [&](const Estimate& e) { estimates.push_back(e); });
@@ -427,7 +428,7 @@ TEST_F(StoreTest, BatchedEstimatesKeepAppendOrderAndAreSeenAtOnce) {
                                 store.add_link(session, "imu2", "imubridge", "")};
   const std::int64_t runs[] = {store.begin_run(session, {.kind = "live"}),
                                store.begin_run(session, {.kind = "replay"})};
-  const std::size_t count = 2 * Store::kEstimateBatchRows + 5;
+  const std::size_t count = Store::kMaxWaitingRows + 2 * Store::kRowsPerStatement + 5;  // a burst, then waiting ones
   std::map<std::int64_t, std::vector<Estimate>> appended;
   std::string seqs;
   for (std::size_t i = 0; i < count; ++i) {
@@ -455,6 +456,75 @@ TEST_F(StoreTest, BatchedEstimatesKeepAppendOrderAndAreSeenAtOnce) {
   EXPECT_EQ(committed_estimate_seqs(path_), seqs);
   const Store reader(path_, {.read_only = true});
   for (const std::int64_t run : runs) expect_same_estimates(appended[run], estimates_of(reader, run));
+}
+
+// Chunks and samples wait for their burst too: their own Store's readers see them at once, exactly as it reads them
+// back once they are written (a NaN as NULL, an all-NULL group as absent), in append order across bursts and links.
+TEST_F(StoreTest, WaitingSamplesAndChunksReadBackAsTheyWillBeStored) {
+  Store store(path_, {.commit_interval = 1h});
+  const std::int64_t session = store.begin_session(kLive);
+  const auto imu0 = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+  const auto imu1 = static_cast<std::uint32_t>(store.add_link(session, "imu1", "imubridge", ""));
+  const std::size_t count = Store::kMaxWaitingRows + Store::kRowsPerStatement + 3;
+  std::vector<protocol::Sample> appended;
+  std::vector<Chunk> chunks;
+  for (std::size_t i = 0; i < count; ++i) {
+    protocol::Sample s = sample(i % 3 == 0 ? imu1 : imu0, i);
+    switch (i % 6) {
+      case 0: s.accel[1] = kNaN, s.gyro[2] = -0.0; break;
+      case 1: s.has_mag = true, s.mag = {kNaN, kNaN, kNaN}; break;  // all NULL: reads back as no magnetometer
+      case 2: s.has_mag = true, s.mag = {kNaN, 30.0, kDenormal}; break;
+      case 3: s.has_temperature = true, s.temperature_c = kNaN; break;
+      case 4: s.has_temperature = true, s.temperature_c = 21.5, s.has_raw = true, s.raw = {1, -2, 3}; break;
+      case 5: s.raw = {7, 7, 7}; break;  // has_raw is false: the counts are not stored
+    }
+    store.append_sample(session, s);
+    appended.push_back(s);
+    const std::vector<std::uint8_t> bytes(i % 4, static_cast<std::uint8_t>(i));
+    const Chunk c{.link_id = s.link_id,
+                  .direction = i % 5 == 0 ? Direction::tx : Direction::rx,
+                  .recv_mono_ns = static_cast<std::int64_t>(i),
+                  .recv_wall_ns = -static_cast<std::int64_t>(i),
+                  .bytes = bytes};
+    store.append_chunk(session, c.link_id, c.direction, c.recv_mono_ns, c.recv_wall_ns, c.bytes);
+    chunks.push_back(c);
+  }
+  EXPECT_EQ(store.pending_rows(), 2 * count);
+  EXPECT_EQ(committed_samples(path_), "0");
+
+  const auto read = [&](const Store& from, std::optional<std::int64_t> link) {
+    std::vector<protocol::Sample> samples;
+    from.for_each_sample(session, link, [&](const protocol::Sample& s) { samples.push_back(s); });
+    std::vector<Chunk> read_chunks;
+    from.for_each_chunk(session, link, [&](const Chunk& c) { read_chunks.push_back(c); });
+    return std::pair{samples, read_chunks};
+  };
+  const auto [waiting, waiting_chunks] = read(store, std::nullopt);
+  const auto [waiting_imu1, waiting_chunks_imu1] = read(store, imu1);
+  store.commit();
+  EXPECT_EQ(committed_samples(path_), std::to_string(count));
+  const Store reader(path_, {.read_only = true});
+  const auto [stored, stored_chunks] = read(reader, std::nullopt);
+  const auto [stored_imu1, stored_chunks_imu1] = read(reader, imu1);
+
+  ASSERT_EQ(waiting.size(), count);
+  ASSERT_EQ(stored.size(), count);
+  for (std::size_t i = 0; i < count; ++i) {
+    SCOPED_TRACE(i);
+    expect_same_sample(stored[i], waiting[i]);
+    EXPECT_EQ(stored[i].raw, waiting[i].raw) << "counts not stored read back as zeros";
+    EXPECT_EQ(stored[i].seq, appended[i].seq);
+  }
+  EXPECT_FALSE(stored[1].has_mag);
+  EXPECT_TRUE(stored[2].has_mag);
+  EXPECT_FALSE(stored[3].has_temperature);
+  EXPECT_FALSE(stored[5].has_raw);
+  EXPECT_EQ(waiting_chunks, chunks);
+  EXPECT_EQ(stored_chunks, chunks);
+  ASSERT_EQ(waiting_imu1.size(), stored_imu1.size());
+  EXPECT_EQ(waiting_imu1.size(), (count + 2) / 3);
+  for (std::size_t i = 0; i < stored_imu1.size(); ++i) expect_same_sample(stored_imu1[i], waiting_imu1[i]);
+  EXPECT_EQ(waiting_chunks_imu1, stored_chunks_imu1);
 }
 
 TEST_F(StoreTest, EstimateOfAnUnknownLinkFailsAtOnceAndTheWaitingOnesStay) {
@@ -486,13 +556,13 @@ TEST_F(StoreTest, EstimatesOfARunDeletedBehindTheStoresBackAreRefusedAlone) {
                      .c_str());
 
   std::vector<std::string> errors;
-  for (std::uint64_t seq = 1; seq <= Store::kEstimateBatchRows; ++seq) {  // the last one fills the batch
+  for (std::uint64_t seq = 1; seq <= Store::kMaxWaitingRows; ++seq) {  // the last one starts a burst
     errors.push_back(
         error_of([&] { store.append_estimate(seq % 4 == 0 ? deleted : kept, {.link_id = link, .seq = seq}); }));
   }
-  EXPECT_EQ(std::count(errors.begin(), errors.end(), ""), Store::kEstimateBatchRows - 1);
+  EXPECT_EQ(std::count(errors.begin(), errors.end(), ""), Store::kMaxWaitingRows - 1);
   EXPECT_EQ(errors.back(), path_.string() + ": FOREIGN KEY constraint failed (appending an estimate)");
-  const std::size_t kept_rows = Store::kEstimateBatchRows - Store::kEstimateBatchRows / 4;
+  const std::size_t kept_rows = Store::kMaxWaitingRows - Store::kMaxWaitingRows / 4;
   EXPECT_EQ(store.pending_rows(), kept_rows);
   store.commit();
   EXPECT_EQ(query(path_, ("SELECT count(*) FROM estimates WHERE run_id = " + std::to_string(kept)).c_str()),
@@ -634,7 +704,7 @@ TEST_F(StoreTest, FullDiskDropsTheWaitingEstimatesWithTheirBatch) {
   const std::int64_t run = store.begin_run(session, {.kind = "live"});
   store.append_estimate(run, {.link_id = link, .seq = 0});
   store.commit();
-  const std::size_t lost = Store::kEstimateBatchRows + 8;  // a batch in SQLite's transaction, 8 in memory
+  const std::size_t lost = Store::kMaxWaitingRows + 8;  // a burst in SQLite's transaction, 8 waiting in memory
   for (std::uint64_t seq = 1; seq <= lost; ++seq) store.append_estimate(run, {.link_id = link, .seq = seq});
 
   FullDisk::full = true;
