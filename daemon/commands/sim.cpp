@@ -205,7 +205,11 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
 const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   auto o = std::make_shared<SimOptions>();
   auto* cmd = app.add_subcommand("sim", "Fly a simulated quadrotor and record, write or stream its IMU data");
-  cmd->add_option("--scenario", o->scenario, "paper | center | hover (docs/simulator.md)")->capture_default_str();
+  std::string scenarios;  // from the simulator's own list, so a new scenario is never missing here
+  for (const std::string_view name : sim::scenario_names()) {
+    scenarios += (scenarios.empty() ? "" : " | ") + std::string(name);
+  }
+  cmd->add_option("--scenario", o->scenario, scenarios + " (docs/simulator.md)")->capture_default_str();
   cmd->add_option("--seed", o->seed, "Random seed: same seed, same bytes")->capture_default_str();
   cmd->add_option("--duration", o->duration_s, "Flight length in seconds (default: the scenario's)");
   cmd->add_option("--rate", o->rate_hz, "IMU sample rate in Hz (default: the scenario's)");
