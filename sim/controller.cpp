@@ -14,7 +14,7 @@ Vector3d euler_zyx(const Eigen::Quaterniond& attitude) {
   return {std::atan2(c(2, 1), c(2, 2)), std::asin(std::clamp(-c(2, 0), -1.0, 1.0)), std::atan2(c(1, 0), c(0, 0))};
 }
 
-Vector4d Controller::rotor_command(const RigidState& s, const AttitudeReference& ref) const {
+Vector4d Controller::rotor_command(const RigidState& s, const FlightReference& ref) const {
   const QuadrotorParams& p = vehicle_.params();
   const ControllerGains& g = gains_;
   const Vector3d euler = euler_zyx(s.attitude);
@@ -37,8 +37,11 @@ Vector4d Controller::rotor_command(const RigidState& s, const AttitudeReference&
   const Vector3d torque =
       inertia.cwiseProduct(angular_accel) + s.omega.cross(inertia.cwiseProduct(s.omega)) + s.omega.cross(rotors);
 
-  // Altitude hold; eq. (1)'s z row, Zdd = g - cos(phi) cos(theta) U1, solved for the thrust.
-  const double accel_down = g.altitude_kp * (hold_.z() - s.position.z()) - g.altitude_kd * s.velocity.z();
+  // Altitude hold at the reference height (up, so down is its negative); eq. (1)'s z row,
+  // Zdd = g - cos(phi) cos(theta) U1, solved for the thrust.
+  const double accel_down = -ref.height.acceleration +
+                            g.altitude_kp * (hold_.z() - ref.height.value - s.position.z()) -
+                            g.altitude_kd * (s.velocity.z() + ref.height.rate);
   const double cos_tilt = std::max(0.5, std::cos(euler.x()) * std::cos(euler.y()));
   const double thrust = p.mass_kg * (kGravity - accel_down) / cos_tilt;
 

@@ -1,6 +1,7 @@
 #pragma once
 // Flight controller: roll/pitch angle PD with the reference's rate and acceleration fed forward, yaw-rate P,
-// altitude hold and a weak horizontal position hold. Stateless, so the flight is a pure function of the state.
+// altitude PD around the reference height (its rate and acceleration fed forward) and a weak horizontal position
+// hold. Stateless, so the flight is a pure function of the state.
 #include <Eigen/Core>
 
 #include "sim/quadrotor.hpp"
@@ -21,12 +22,12 @@ Eigen::Vector3d euler_zyx(const Eigen::Quaterniond& attitude);
 
 class Controller {
  public:
-  // Holds the altitude and horizontal position of `hold_position`.
+  // Holds the horizontal position of `hold_position`, and its altitude plus the reference's height.
   Controller(const Quadrotor& vehicle, const ControllerGains& gains, const Eigen::Vector3d& hold_position)
       : vehicle_(vehicle), gains_(gains), hold_(hold_position) {}
 
   // Rotor speed commands (rad/s, front, right, rear, left).
-  Eigen::Vector4d rotor_command(const RigidState& s, const AttitudeReference& ref) const;
+  Eigen::Vector4d rotor_command(const RigidState& s, const FlightReference& ref) const;
 
  private:
   Quadrotor vehicle_;  // the controller knows the vehicle exactly: it inverts eq. (1)-(2)

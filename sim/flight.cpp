@@ -10,6 +10,8 @@ namespace {
 
 // Manoeuvres and sensor noise draw from separate streams of the one seed.
 constexpr std::uint64_t kPlanStream = 1;
+// The altitude plan has its own (the sensor noise is stream 2): switching it on leaves roll and pitch as they were.
+constexpr std::uint64_t kVerticalPlanStream = 3;
 
 }  // namespace
 
@@ -19,6 +21,8 @@ Flight::Flight(const FlightConfig& config, double duration_s, std::uint64_t seed
       dt_(1.0 / config.physics_rate_hz) {
   Rng rng = Rng::stream(seed, kPlanStream);
   plan_ = plan_manoeuvres(config.manoeuvres, duration_s, rng);
+  Rng vertical_rng = Rng::stream(seed, kVerticalPlanStream);
+  plan_.height = plan_vertical_manoeuvres(config.vertical, duration_s, vertical_rng);
   const RigidState start = vehicle_.hover_at({0.0, 0.0, -config.start_altitude_m});
   nodes_.push_back({start, controller_.rotor_command(start, plan_.at(0.0))});
 }

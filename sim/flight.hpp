@@ -17,6 +17,7 @@ struct FlightConfig {
   Aerodynamics air;
   ControllerGains gains;
   ManoeuvreConfig manoeuvres;
+  VerticalManoeuvreConfig vertical;
   double physics_rate_hz = 2000.0;
   double start_altitude_m = 1.5;  // starts hovering here, above the NED origin
 };

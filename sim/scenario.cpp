@@ -11,7 +11,7 @@ namespace imubridge::sim {
 
 namespace {
 
-constexpr std::array<std::string_view, 4> kNames{"paper", "center", "hover", "agile"};
+constexpr std::array<std::string_view, 5> kNames{"paper", "center", "hover", "agile", "climb"};
 
 }  // namespace
 
@@ -26,12 +26,14 @@ SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional
     config.imu.pose = ImuPose::paper(kPaperR, kPaperBeta, kPaperAlpha);
   } else if (name == "center") {
     // Defaults already: IMU at the mass centre, axes aligned.
-  } else if (name == "agile") {
+  } else if (name == "agile" || name == "climb") {
     // Tilts up to twice the paper's, as often in roll as in pitch: the altitude hold's thrust g / (cos phi cos theta)
     // then varies by up to a fifth, and rolling with the sensor tilted separates the lever arm's z from eq. (14).
     config.imu.pose = ImuPose::paper(kPaperR, kPaperBeta, kPaperAlpha);
     config.flight.manoeuvres.amplitude_max_rad = 0.6;
     config.flight.manoeuvres.roll_share = 0.5;
+    // Climbs and descents on top, as an identification flight flies them: the thrust varies by tens of per cent.
+    config.flight.vertical.enabled = name == "climb";
   } else if (name == "hover") {
     config.flight.manoeuvres.enabled = false;
     config.duration_s = 10.0;

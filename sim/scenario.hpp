@@ -6,6 +6,8 @@
 //   hover  - no manoeuvres, IMU at the mass centre, the paper's drag, 10 s.
 //   agile  - the paper's IMU pose and drag with tilts up to 0.6 rad (the paper's: 0.35), half of them in roll: the
 //            thrust varies by up to a fifth, and roll and pitch both turn the sensor.
+//   climb  - the agile flight (same roll and pitch plan) with climbs and descents of 0.3-1 m at up to g/2: the thrust
+//            varies by tens of per cent.
 #include <cstdint>
 #include <numbers>
 #include <optional>

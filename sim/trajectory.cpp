@@ -59,24 +59,59 @@ struct Manoeuvre {
   }
 };
 
+// Manoeuvres one after another from `first_start_s`, gaps of [gap_min, gap_max) between them, until one would end
+// later than 1 s before the flight's end. `draw(rng)` gives the next manoeuvre and the curve it goes on.
+template <typename Draw>
+void plan_sequence(double first_start_s, double gap_min_s, double gap_max_s, double duration_s, Rng& rng, Draw draw) {
+  for (double t = first_start_s;;) {
+    const auto [curve, m] = draw(rng);
+    if (t + m.length() > duration_s - 1.0) break;
+    m.append_to(*curve, t);
+    t += m.length() + rng.uniform(gap_min_s, gap_max_s);
+  }
+}
+
+Manoeuvre::Kind draw_kind(Rng& rng) {
+  return static_cast<Manoeuvre::Kind>(std::min(2, static_cast<int>(rng.uniform() * 3)));
+}
+
+double draw_sign(Rng& rng) { return rng.uniform() < 0.5 ? -1.0 : 1.0; }
+
 }  // namespace
 
 Trajectory plan_manoeuvres(const ManoeuvreConfig& c, double duration_s, Rng& rng) {
   Trajectory plan;
   if (!c.enabled) return plan;
-  for (double t = c.first_start_s;;) {
-    CosineCurve& curve = rng.uniform() < c.roll_share ? plan.roll : plan.pitch;
+  plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
+    CosineCurve* curve = r.uniform() < c.roll_share ? &plan.roll : &plan.pitch;
     Manoeuvre m;
-    m.kind = static_cast<Manoeuvre::Kind>(std::min(2, static_cast<int>(rng.uniform() * 3)));
-    m.amplitude = (rng.uniform() < 0.5 ? -1.0 : 1.0) * rng.uniform(c.amplitude_min_rad, c.amplitude_max_rad);
-    m.swing = rng.uniform(c.swing_min_s, c.swing_max_s);
-    m.hold = rng.uniform(c.hold_min_s, c.hold_max_s);
-    m.cycles = 2 + static_cast<int>(rng.uniform() * 2);
-    if (t + m.length() > duration_s - 1.0) break;
-    m.append_to(curve, t);
-    t += m.length() + rng.uniform(c.gap_min_s, c.gap_max_s);
-  }
+    m.kind = draw_kind(r);
+    const double sign = draw_sign(r);  // before the size, as plans have always been drawn: seeds keep their flights
+    m.amplitude = sign * r.uniform(c.amplitude_min_rad, c.amplitude_max_rad);
+    m.swing = r.uniform(c.swing_min_s, c.swing_max_s);
+    m.hold = r.uniform(c.hold_min_s, c.hold_max_s);
+    m.cycles = 2 + static_cast<int>(r.uniform() * 2);
+    return std::pair{curve, m};
+  });
   return plan;
+}
+
+CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& c, double duration_s, Rng& rng) {
+  CosineCurve height;
+  if (!c.enabled) return height;
+  plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
+    Manoeuvre m;
+    m.kind = draw_kind(r);
+    const double sign = draw_sign(r);
+    m.amplitude = sign * r.uniform(c.height_min_m, c.height_max_m);
+    m.swing = r.uniform(c.swing_min_s, c.swing_max_s);
+    m.hold = r.uniform(c.hold_min_s, c.hold_max_s);
+    m.cycles = 2 + static_cast<int>(r.uniform() * 2);
+    // The largest swing (+A -> -A) peaks at A (pi / swing)^2.
+    m.swing = std::max(m.swing, std::numbers::pi * std::sqrt(std::abs(m.amplitude) / c.max_acceleration_mps2));
+    return std::pair{&height, m};
+  });
+  return height;
 }
 
 }  // namespace imubridge::sim

@@ -1,9 +1,11 @@
 #pragma once
 // The flight plan: roll and pitch angle references made of manoeuvres like the paper's laboratory flight
-// (doublets, sinusoid bursts, steps), with seeded random amplitudes, lengths and timing.
+// (doublets, sinusoid bursts, steps), with seeded random amplitudes, lengths and timing; optionally, the same kinds
+// of manoeuvre on the altitude (climbs and descents), which make the thrust vary.
 #include <utility>
 #include <vector>
 
+#include "sim/quadrotor.hpp"
 #include "sim/random.hpp"
 
 namespace imubridge::sim {
@@ -36,18 +38,37 @@ struct ManoeuvreConfig {
   double roll_share = 0.3;                        // the rest are pitch manoeuvres
 };
 
-// What the attitude controller tracks (body roll/pitch angles with their rates and accelerations, yaw rate).
-struct AttitudeReference {
+// Altitude manoeuvres: the altitude reference steps up or down and back (step), up then down past the hold and back
+// (doublet) or bobs (burst). An identification flight excites the vertical axis so that the thrust varies; holding
+// altitude, it varies only through the tilt, g / (cos phi cos theta). Off by default.
+struct VerticalManoeuvreConfig {
+  bool enabled = false;
+  double first_start_s = 2.0;
+  double gap_min_s = 0.5, gap_max_s = 2.0;
+  double height_min_m = 0.3, height_max_m = 1.0;  // away from the hold altitude, up or down
+  double swing_min_s = 0.5, swing_max_s = 1.2;
+  double hold_min_s = 0.2, hold_max_s = 1.0;
+  // A swing is slowed down, if need be, to keep the vertical acceleration under this: the thrust then stays within
+  // (1 +- this / g) times the weight, well inside what the rotors give (thrust / weight about 4).
+  double max_acceleration_mps2 = 0.5 * kGravity;
+};
+
+// What the controller tracks: body roll/pitch angles with their rates and accelerations, yaw rate, and the height
+// above the hold altitude (m, up) with its rate and acceleration.
+struct FlightReference {
   CosineCurve::Point roll, pitch;
   double yaw_rate = 0.0;
+  CosineCurve::Point height;
 };
 
 struct Trajectory {
-  CosineCurve roll, pitch;
-  AttitudeReference at(double t) const { return {roll.at(t), pitch.at(t), 0.0}; }
+  CosineCurve roll, pitch, height;
+  FlightReference at(double t) const { return {roll.at(t), pitch.at(t), 0.0, height.at(t)}; }
 };
 
-// Manoeuvres start after the lead-in and all end before `duration_s` - 1 s.
+// Manoeuvres start after the lead-in and all end before `duration_s` - 1 s. Fills roll and pitch.
 Trajectory plan_manoeuvres(const ManoeuvreConfig& config, double duration_s, Rng& rng);
+// The same for the altitude: the height curve, empty when disabled.
+CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& config, double duration_s, Rng& rng);
 
 }  // namespace imubridge::sim

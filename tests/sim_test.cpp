@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "sim/effects.hpp"
+#include "sim/flight.hpp"
 #include "sim/quadrotor.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"
@@ -179,6 +180,35 @@ TEST(SimFlight, PaperScenarioIsAgileAndStaysNearTheStart) {
       << "fast enough for drag to show";
   EXPECT_LT(max_of(v, [](const SimSample& s) { return s.truth.position_ned.head<2>().norm(); }), 5.0);
   EXPECT_LT(max_of(v, [](const SimSample& s) { return std::abs(s.truth.position_ned.z() + 1.5); }), 0.2);
+}
+
+// The `climb` scenario is the agile flight with climbs and descents: the same roll and pitch plan, the altitude
+// following its reference and back at the start height when the plan ends, and a thrust (body-z specific force at
+// the mass centre) that varies far more than the altitude hold's g / (cos phi cos theta) makes it.
+TEST(SimFlight, ClimbsMakeTheThrustVaryAndTheAltitudeReturns) {
+  const SimConfig climb_config = make_scenario("climb", 7, 40.0);
+  const SimConfig agile_config = make_scenario("agile", 7, 40.0);
+  Flight climbing(climb_config.flight, climb_config.duration_s, climb_config.seed);
+  Flight level(agile_config.flight, agile_config.duration_s, agile_config.seed);
+  ASSERT_GT(climbing.plan().height.end_time(), 20.0);
+  EXPECT_EQ(level.plan().height.end_time(), 0.0);
+
+  const Samples climb = simulate(climb_config), agile = simulate(agile_config);
+  const auto thrust = [](const SimSample& s) { return -s.truth.specific_force.z(); };
+  for (std::size_t i = 0; i < climb.size(); ++i) {
+    const double t = climb[i].time_s;
+    ASSERT_EQ(climbing.plan().roll.at(t).value, level.plan().roll.at(t).value);
+    ASSERT_EQ(climbing.plan().pitch.at(t).value, level.plan().pitch.at(t).value);
+    const double height = -climb[i].truth.position_ned.z() - climb_config.flight.start_altitude_m;
+    ASSERT_NEAR(height, climbing.plan().height.at(t).value, 0.05) << "t=" << t;
+    // The acceleration limit keeps the thrust well between free fall and the rotors' limit.
+    ASSERT_GT(thrust(climb[i]), 0.4 * kGravity) << "t=" << t;
+    ASSERT_LT(thrust(climb[i]), 2.0 * kGravity) << "t=" << t;
+  }
+  EXPECT_NEAR(-climb.back().truth.position_ned.z(), climb_config.flight.start_altitude_m, 0.01);
+  const double climb_spread = stddev_of(climb, thrust), agile_spread = stddev_of(agile, thrust);
+  EXPECT_GT(climb_spread, 0.1 * kGravity) << "tens of per cent";
+  EXPECT_GT(climb_spread, 2.0 * agile_spread);
 }
 
 TEST(SimFlight, OmegaDotIsTheDerivativeOfOmega) {
@@ -472,6 +502,27 @@ TEST(SimTrajectory, ManoeuvresStayInsideTheirBoundsAndTheFlight) {
   ManoeuvreConfig off = config;
   off.enabled = false;
   EXPECT_EQ(plan_manoeuvres(off, 60.0, rng).pitch.end_time(), 0.0);
+}
+
+TEST(SimTrajectory, VerticalManoeuvresStayInsideTheirHeightAndAcceleration) {
+  VerticalManoeuvreConfig config;
+  EXPECT_FALSE(config.enabled) << "off by default: the existing scenarios fly as before";
+  config.enabled = true;
+  Rng rng(9);
+  const CosineCurve height = plan_vertical_manoeuvres(config, 60.0, rng);
+  EXPECT_LE(height.end_time(), 59.0);
+  EXPECT_GT(height.end_time(), 30.0);
+  double lowest = 0.0, highest = 0.0;
+  for (double t = 0; t < 60.0; t += 0.01) {
+    ASSERT_LE(std::abs(height.at(t).value), config.height_max_m);
+    ASSERT_LE(std::abs(height.at(t).acceleration), config.max_acceleration_mps2 + 1e-9);
+    lowest = std::min(lowest, height.at(t).value);
+    highest = std::max(highest, height.at(t).value);
+  }
+  EXPECT_LT(lowest, -config.height_min_m) << "descents";
+  EXPECT_GT(highest, config.height_min_m) << "climbs";
+  config.enabled = false;
+  EXPECT_EQ(plan_vertical_manoeuvres(config, 60.0, rng).end_time(), 0.0);
 }
 
 }  // namespace
