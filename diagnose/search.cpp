@@ -5,6 +5,7 @@
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <stdexcept>
 
 #include "diagnose/effects/library.hpp"
@@ -32,6 +33,28 @@ double sum_of_squares(const AxisValues& residual) {
     for (double r : axis) sum += r * r;
   }
   return sum;
+}
+
+// A multirotor in flight never tilts past 90 degrees: its thrust would point down. From the IMU alone the attitude is
+// integrated from the gyro, and an effect that changes it (a gyro bias, say) can buy a better fit by bending the
+// velocity integrated from that attitude into a shape no flight has: the fitted attitude then turns past 90 degrees.
+constexpr double kMaxFlightTiltRad = std::numbers::pi / 2;
+
+struct Implausible : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// The largest tilt (angle between body z and down) of the model's attitude over the training and validation windows.
+double largest_tilt(const Model& model, std::span<const double> p, Range train, Range validation) {
+  const std::vector<Eigen::Quaterniond> attitude = model.inputs(p).attitude;
+  double largest = 0.0;
+  for (const Range r : {train, validation}) {
+    for (std::size_t k = r.first; k < r.first + r.count; ++k) {
+      const double down = (attitude[k] * Eigen::Vector3d::UnitZ()).z();  // NED: 1 when level
+      largest = std::max(largest, std::acos(std::clamp(down, -1.0, 1.0)));
+    }
+  }
+  return largest;
 }
 
 // The current model: its effects, fitted values and what they give.
@@ -178,6 +201,10 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
 
   for (int step = 0; step < options.max_steps; ++step) {
     const std::vector<std::string> in_model = names_of(current.effects);
+    // Only judged when the attitude comes from the gyro, and only if the current model's attitude is a flight's.
+    const bool judge_tilt =
+        setup.velocity == VelocitySource::kImu &&
+        largest_tilt(Model(signals, setup, current.effects), current.fit.values, train, validation) <= kMaxFlightTiltRad;
     std::vector<CandidateTrial> trials;
     std::vector<std::optional<State>> fitted;
     for (const auto& effect : effect_library()) {
@@ -207,6 +234,15 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
               FitOutcome other = fit(model, start, train);
               if (other.convergence.back() < best.convergence.back()) best = std::move(other);
             }
+            const double tilt = judge_tilt ? largest_tilt(model, best.values, train, validation) : 0.0;
+            if (tilt > kMaxFlightTiltRad) {
+              char why[160];
+              std::snprintf(why, sizeof why,
+                            "implausible: its fit tilts the gyro-integrated attitude to %.0f deg, past the 90 deg "
+                            "no multirotor in flight reaches",
+                            tilt * 180.0 / std::numbers::pi);
+              throw Implausible(why);
+            }
             candidate = settle(model, std::move(best), train, validation);
             trial.rmse_train = candidate->summary.rmse_train;
             trial.rmse_validation = candidate->summary.rmse_validation;
@@ -218,6 +254,9 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
             trial.statistic = test.statistic;
             trial.p_value = test.p_value;
           }
+        } catch (const Implausible& e) {
+          trial.skipped = e.what();
+          candidate.reset();
         } catch (const std::exception& e) {
           trial.skipped = std::string("failed to fit: ") + e.what();
           candidate.reset();

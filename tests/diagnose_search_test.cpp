@@ -154,6 +154,24 @@ TEST_P(FoundFirst, GyroBias) {
   }
 }
 
+// On seed 9 the fit from the IMU alone once took a gyro bias of -0.53 rad/s on one axis: the attitude it integrates
+// spins through full turns, and the velocity it bends that way fitted the residual better. No flight tilts past
+// 90 degrees, so such a fit is refused with its reason, and no wrong bias is reported.
+TEST(FoundFirstImu, AGyroBiasThatWouldTurnTheVehicleOverIsRefused) {
+  const Diagnosis d =
+      diagnose({.sim_effects = {"gyro_bias=0.02"}, .velocity = VelocitySource::kImu, .max_steps = 1, .seed = 9});
+  for (const Step& step : d.steps) {
+    if (step.effect != "gyro_bias") continue;
+    for (const auto& p : step.params) EXPECT_NEAR(p.value, 0.02, 0.005) << p.name;
+  }
+  const std::vector<CandidateTrial>& tried = d.steps.empty() ? d.last_candidates : d.steps.front().candidates;
+  const auto gyro_bias = std::find_if(tried.begin(), tried.end(), [](const auto& t) { return t.effect == "gyro_bias"; });
+  ASSERT_NE(gyro_bias, tried.end());
+  if (d.steps.empty() || d.steps.front().effect != "gyro_bias") {
+    EXPECT_NE(gyro_bias->skipped.find("implausible"), std::string::npos) << gyro_bias->skipped;
+  }
+}
+
 // The full model (rigid body and mounting) has no drag of its own; give the flight a strong one.
 TEST(FoundFirstFull, QuadraticDragWithTheReference) {
   const Diagnosis d = diagnose({.sim_effects = {"quadratic_drag=0.5"}, .model = BaseModel::kFull, .max_steps = 1});
