@@ -70,8 +70,6 @@ std::optional<std::int64_t> column_optional_int(const Statement& row, int column
 std::int64_t seq_to_column(std::uint64_t seq) { return static_cast<std::int64_t>(seq); }
 std::uint64_t seq_from_column(std::int64_t value) { return static_cast<std::uint64_t>(value); }
 
-Statement& bind_optional_int(Statement& statement, int index, std::optional<std::int64_t> value);
-
 // SQLite stores a NaN as NULL, and a NULL reads back as the quiet NaN.
 double as_stored(double value) { return std::isnan(value) ? std::numeric_limits<double>::quiet_NaN() : value; }
 
@@ -326,12 +324,13 @@ void Store::append_estimate(std::int64_t run, const Estimate& e) {
 }
 
 template <typename Row>
-Store::Table<Row>::Table(const Database& db, std::string_view insert_into, std::size_t columns, std::string_view what)
+Store::Table<Row>::Table(const Database& db, std::string_view insert_into, std::size_t columns,
+                         std::string_view what_one, std::string_view what_many)
     : one(db, insert_sql(insert_into, columns, 1)),
       many(db, insert_sql(insert_into, columns, kRowsPerStatement)),
       columns(columns),
-      what_one("appending a" + std::string(what.starts_with('e') ? "n " : " ") + std::string(what)),
-      what_many("appending " + std::string(what) + "s") {}
+      what_one(what_one),
+      what_many(what_many) {}
 
 template <typename Row>
 void Store::append_waiting(Table<Row>& table, Row row) {

@@ -121,7 +121,8 @@ class Store {
   // One table's waiting rows and its two INSERTs (one row, kRowsPerStatement rows).
   template <typename Row>
   struct Table {
-    Table(const Database& db, std::string_view insert_into, std::size_t columns, std::string_view what);
+    Table(const Database& db, std::string_view insert_into, std::size_t columns, std::string_view what_one,
+          std::string_view what_many);
     Statement one, many;
     std::size_t columns;
     std::string what_one, what_many;  // "appending a sample", "appending samples"
@@ -161,20 +162,21 @@ class Store {
                             "VALUES (?1, ?2, ?3, ?4, ?5)"};
   Statement end_session_{db_, "UPDATE sessions SET ended_wall_ns = ?2 WHERE id = ?1"};
   Statement insert_link_{db_, "INSERT INTO links (session_id, name, protocol, device) VALUES (?1, ?2, ?3, ?4)"};
-  Table<detail::WaitingChunk> chunks_{db_, "chunks (session_id, link_id, direction, recv_mono_ns, recv_wall_ns, bytes)", 6,
-                              "chunk"};
+  Table<detail::WaitingChunk> chunks_{db_, "chunks (session_id, link_id, direction, recv_mono_ns, recv_wall_ns, bytes)",
+                                      6, "appending a chunk", "appending chunks"};
   Table<detail::WaitingSample> samples_{db_,
-                                "samples (session_id, link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, "
-                                "gz, mx, my, mz, temperature_c, raw)",
-                                16, "sample"};
+                                        "samples (session_id, link_id, seq, device_time_us, recv_mono_ns, ax, ay, "
+                                        "az, gx, gy, gz, mx, my, mz, temperature_c, raw)",
+                                        16, "appending a sample", "appending samples"};
   Statement insert_event_{db_,
                           "INSERT INTO events (session_id, link_id, mono_ns, wall_ns, kind, count, detail) "
                           "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"};
   Statement insert_run_{db_,
                         "INSERT INTO runs (session_id, kind, params, created_wall_ns, software_version) "
                         "VALUES (?1, ?2, ?3, ?4, ?5)"};
-  Table<detail::WaitingEstimate> estimates_{
-      db_, "estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy)", 10, "estimate"};
+  Table<detail::WaitingEstimate> estimates_{db_,
+                                            "estimates (run_id, link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy)", 10,
+                                            "appending an estimate", "appending estimates"};
   Statement insert_reference_{db_,
                               "INSERT INTO reference (session_id, t_ns, px, py, pz, qw, qx, qy, qz, vx, vy, vz) "
                               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)"};
