@@ -1,10 +1,10 @@
 #include "diagnose/search.hpp"
 
 #include <algorithm>
-#include <limits>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -40,21 +40,29 @@ double sum_of_squares(const AxisValues& residual) {
 // velocity integrated from that attitude into a shape no flight has: the fitted attitude then turns past 90 degrees.
 constexpr double kMaxFlightTiltRad = std::numbers::pi / 2;
 
-struct Implausible : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
 // The largest tilt (angle between body z and down) of the model's attitude over the training and validation windows.
 double largest_tilt(const Model& model, std::span<const double> p, Range train, Range validation) {
-  const std::vector<Eigen::Quaterniond> attitude = model.inputs(p).attitude;
+  const ModelInputs inputs = model.inputs(p);
   double largest = 0.0;
   for (const Range r : {train, validation}) {
     for (std::size_t k = r.first; k < r.first + r.count; ++k) {
-      const double down = (attitude[k] * Eigen::Vector3d::UnitZ()).z();  // NED: 1 when level
+      const double down = (inputs.attitude[k] * Eigen::Vector3d::UnitZ()).z();  // NED: 1 when level
       largest = std::max(largest, std::acos(std::clamp(down, -1.0, 1.0)));
     }
   }
   return largest;
+}
+
+// Why a fitted candidate describes no flight, or nullopt.
+std::optional<std::string> unflyable(const Model& model, std::span<const double> p, Range train, Range validation) {
+  const double tilt = largest_tilt(model, p, train, validation);
+  if (tilt <= kMaxFlightTiltRad) return std::nullopt;
+  char why[160];
+  std::snprintf(why, sizeof why,
+                "implausible: its fit tilts the gyro-integrated attitude to %.0f deg, past the 90 deg no multirotor in "
+                "flight reaches",
+                tilt * 180.0 / std::numbers::pi);
+  return why;
 }
 
 // The current model: its effects, fitted values and what they give.
@@ -118,7 +126,8 @@ std::vector<ResidualAnalysis> analyse(const Model& model, const State& state, Ra
   analysis.whiteness_lag_spacing_s =
       std::max(2.0 * kDerivativeHalfWindowS, options.lowpass_hz > 0.0 ? 1.0 / options.lowpass_hz : 0.0);
   std::vector<ResidualAnalysis> out;
-  for (const std::vector<double>& r : state.validation_residual) out.push_back(analyse_residual(t, r, candidates, analysis));
+  for (const std::vector<double>& r : state.validation_residual)
+    out.push_back(analyse_residual(t, r, candidates, analysis));
   return out;
 }
 
@@ -181,8 +190,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   constexpr std::size_t kMinSamples = 64;
   if (train.count < kMinSamples || validation.count < kMinSamples)
     throw std::invalid_argument("diagnose: the training and validation windows need at least 64 samples each");
-  const std::size_t span_lag =
-      static_cast<std::size_t>(std::lround(kCorrelationSpanS * sample_rate_hz(signals.t)));
+  const std::size_t span_lag = static_cast<std::size_t>(std::lround(kCorrelationSpanS * sample_rate_hz(signals.t)));
 
   Diagnosis out;
   out.session = options.session;
@@ -202,67 +210,64 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   for (int step = 0; step < options.max_steps; ++step) {
     const std::vector<std::string> in_model = names_of(current.effects);
     // Only judged when the attitude comes from the gyro, and only if the current model's attitude is a flight's.
-    const bool judge_tilt =
-        setup.velocity == VelocitySource::kImu &&
-        largest_tilt(Model(signals, setup, current.effects), current.fit.values, train, validation) <= kMaxFlightTiltRad;
+    const bool judge_tilt = setup.velocity == VelocitySource::kImu &&
+                            largest_tilt(Model(signals, setup, current.effects), current.fit.values, train,
+                                         validation) <= kMaxFlightTiltRad;
+    // One candidate: the current model plus `effect`, fitted on the training window and tested on the validation
+    // window; or the reason it was not tried.
+    const auto try_effect = [&](const Effect& effect) -> std::pair<CandidateTrial, std::optional<State>> {
+      CandidateTrial trial;
+      trial.effect = std::string(effect.name());
+      if (auto why = effect.why_not(setup, in_model)) {
+        trial.skipped = *why;
+        return {trial, std::nullopt};
+      }
+      try {
+        std::vector<const Effect*> effects = current.effects;
+        effects.push_back(&effect);
+        const Model model(signals, setup, effects);
+        // Warm start: the current values, then the new effect's own start.
+        std::vector<double> start = current.fit.values;
+        const std::size_t offset = start.size();
+        for (std::size_t i = offset; i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+        const std::span<const double> train_t(signals.t.data() + train.first, train.count);
+        const StartContext context{setup, train_t, current.train_residual};
+        if (auto why = effect.start(context, std::span<double>(start).subspan(offset))) {
+          trial.skipped = *why;
+          return {trial, std::nullopt};
+        }
+        FitOutcome best = fit(model, start, train);
+        for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(offset))) {
+          std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(offset));
+          FitOutcome other = fit(model, start, train);
+          if (other.convergence.back() < best.convergence.back()) best = std::move(other);
+        }
+        if (auto why = judge_tilt ? unflyable(model, best.values, train, validation) : std::nullopt) {
+          trial.skipped = *why;
+          return {trial, std::nullopt};
+        }
+        State candidate = settle(model, std::move(best), train, validation);
+        trial.rmse_train = candidate.summary.rmse_train;
+        trial.rmse_validation = candidate.summary.rmse_validation;
+        double n_eff = 0.0;
+        for (const std::vector<double>& r : candidate.validation_residual) n_eff += effective_samples(r, span_lag);
+        const FTest test = validation_f_test(sum_of_squares(current.validation_residual),
+                                             sum_of_squares(candidate.validation_residual),
+                                             model.parameters().size() - offset, model.parameters().size(), n_eff);
+        trial.statistic = test.statistic;
+        trial.p_value = test.p_value;
+        return {trial, std::move(candidate)};
+      } catch (const std::exception& e) {
+        trial.skipped = std::string("failed to fit: ") + e.what();
+        return {trial, std::nullopt};
+      }
+    };
     std::vector<CandidateTrial> trials;
     std::vector<std::optional<State>> fitted;
     for (const auto& effect : effect_library()) {
       if (std::find(current.effects.begin(), current.effects.end(), effect.get()) != current.effects.end()) continue;
-      CandidateTrial trial;
-      trial.effect = std::string(effect->name());
-      std::optional<State> candidate;
-      if (auto why = effect->why_not(setup, in_model)) {
-        trial.skipped = *why;
-      } else {
-        try {
-          std::vector<const Effect*> effects = current.effects;
-          effects.push_back(effect.get());
-          const Model model(signals, setup, effects);
-          // Warm start: the current values, then the new effect's own start.
-          std::vector<double> start = current.fit.values;
-          const std::size_t offset = start.size();
-          for (std::size_t i = offset; i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
-          const std::span<const double> train_t(signals.t.data() + train.first, train.count);
-          const StartContext context{setup, train_t, current.train_residual};
-          if (auto why = effect->start(context, std::span<double>(start).subspan(offset))) {
-            trial.skipped = *why;
-          } else {
-            FitOutcome best = fit(model, start, train);
-            for (const std::vector<double>& more : effect->more_starts(std::span<const double>(start).subspan(offset))) {
-              std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(offset));
-              FitOutcome other = fit(model, start, train);
-              if (other.convergence.back() < best.convergence.back()) best = std::move(other);
-            }
-            const double tilt = judge_tilt ? largest_tilt(model, best.values, train, validation) : 0.0;
-            if (tilt > kMaxFlightTiltRad) {
-              char why[160];
-              std::snprintf(why, sizeof why,
-                            "implausible: its fit tilts the gyro-integrated attitude to %.0f deg, past the 90 deg "
-                            "no multirotor in flight reaches",
-                            tilt * 180.0 / std::numbers::pi);
-              throw Implausible(why);
-            }
-            candidate = settle(model, std::move(best), train, validation);
-            trial.rmse_train = candidate->summary.rmse_train;
-            trial.rmse_validation = candidate->summary.rmse_validation;
-            double n_eff = 0.0;
-            for (const std::vector<double>& r : candidate->validation_residual) n_eff += effective_samples(r, span_lag);
-            const FTest test = validation_f_test(sum_of_squares(current.validation_residual),
-                                                 sum_of_squares(candidate->validation_residual),
-                                                 model.parameters().size() - offset, model.parameters().size(), n_eff);
-            trial.statistic = test.statistic;
-            trial.p_value = test.p_value;
-          }
-        } catch (const Implausible& e) {
-          trial.skipped = e.what();
-          candidate.reset();
-        } catch (const std::exception& e) {
-          trial.skipped = std::string("failed to fit: ") + e.what();
-          candidate.reset();
-        }
-      }
-      trials.push_back(trial);
+      auto [trial, candidate] = try_effect(*effect);
+      trials.push_back(std::move(trial));
       fitted.push_back(std::move(candidate));
     }
     const std::size_t tried = static_cast<std::size_t>(
