@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "estimator/identify.hpp"
+#include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 
 namespace imubridge::estimator {
@@ -18,16 +19,7 @@ const ImuSeries& series() {
   static const ImuSeries s = [] {
     sim::SimConfig config = sim::make_scenario("paper", 1, 40.0);
     config.imu.rate_hz = kRateHz;
-    ImuSeries out;
-    out.reference.emplace();
-    sim::simulate(config, [&](const sim::SimSample& x) {
-      out.t.push_back(x.time_s);
-      out.gyro.push_back(x.measured.gyro);
-      out.accel.push_back(x.measured.accel);
-      out.reference->velocity_ned.push_back(x.truth.velocity_ned);
-      out.reference->attitude.push_back(x.truth.attitude);
-    });
-    return out;
+    return sim::imu_series(sim::simulate(config));
   }();
   return s;
 }

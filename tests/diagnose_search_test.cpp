@@ -14,6 +14,7 @@
 
 #include "diagnose/search.hpp"
 #include "estimator/imu_series.hpp"
+#include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"
 
@@ -27,17 +28,7 @@ const estimator::TimeWindow kTrain{0.0, 30.0}, kValidate{30.0, 50.0};
 
 estimator::ImuSeries flight(const std::vector<std::string>& effects, const std::string& scenario = "paper",
                             std::uint64_t seed = 7) {
-  const sim::SimConfig config = sim::make_scenario(scenario, seed, kDuration, effects);
-  estimator::ImuSeries series;
-  series.reference.emplace();
-  sim::simulate(config, [&](const sim::SimSample& s) {
-    series.t.push_back(s.time_s);
-    series.gyro.push_back(s.measured.gyro);
-    series.accel.push_back(s.measured.accel);
-    series.reference->velocity_ned.push_back(s.truth.velocity_ned);
-    series.reference->attitude.push_back(s.truth.attitude);
-  });
-  return series;
+  return sim::imu_series(sim::simulate(sim::make_scenario(scenario, seed, kDuration, effects)));
 }
 
 struct Case {

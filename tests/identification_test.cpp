@@ -15,6 +15,7 @@
 #include "estimator/constants.hpp"
 #include "estimator/identify.hpp"
 #include "pipeline/session_series.hpp"
+#include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
 
@@ -45,14 +46,7 @@ const Flight& flight(const std::string& scenario) {
     const sim::SimConfig config = sim::make_scenario(scenario, 1);
     f.samples = sim::simulate(config);
     f.sensor_from_body = config.imu.pose.sensor_from_body;
-    f.series.reference.emplace();
-    for (const sim::SimSample& s : f.samples) {
-      f.series.t.push_back(s.time_s);
-      f.series.gyro.push_back(s.measured.gyro);
-      f.series.accel.push_back(s.measured.accel);
-      f.series.reference->velocity_ned.push_back(s.truth.velocity_ned);
-      f.series.reference->attitude.push_back(s.truth.attitude);
-    }
+    f.series = sim::imu_series(f.samples);
   }
   return f;
 }
