@@ -94,7 +94,8 @@ TEST_P(FoundFirst, Vibration) {
 }
 
 TEST_P(FoundFirst, AccelCross) {
-  const Diagnosis d = diagnose({.sim_effects = {"accel_cross=0.15,0,0.15,0,0,0"}, .velocity = GetParam(), .max_steps = 1});
+  const Diagnosis d =
+      diagnose({.sim_effects = {"accel_cross=0.15,0,0.15,0,0,0"}, .velocity = GetParam(), .max_steps = 1});
   expect_found_first(d, "accel_cross");
   EXPECT_NEAR(param(d.steps.front().params, "cross.xy").value, 0.15, 0.01);
   EXPECT_NEAR(param(d.steps.front().params, "cross.yx").value, 0.15, 0.01);
@@ -156,7 +157,8 @@ TEST(FoundFirstImu, AGyroBiasThatWouldTurnTheVehicleOverIsRefused) {
     for (const auto& p : step.params) EXPECT_NEAR(p.value, 0.02, 0.005) << p.name;
   }
   const std::vector<CandidateTrial>& tried = d.steps.empty() ? d.last_candidates : d.steps.front().candidates;
-  const auto gyro_bias = std::find_if(tried.begin(), tried.end(), [](const auto& t) { return t.effect == "gyro_bias"; });
+  const auto gyro_bias =
+      std::find_if(tried.begin(), tried.end(), [](const auto& t) { return t.effect == "gyro_bias"; });
   ASSERT_NE(gyro_bias, tried.end());
   if (d.steps.empty() || d.steps.front().effect != "gyro_bias") {
     EXPECT_NE(gyro_bias->skipped.find("implausible"), std::string::npos) << gyro_bias->skipped;
@@ -181,7 +183,8 @@ TEST_P(FoundFirst, ThrustInTheAgileFlight) {
   EXPECT_TRUE(std::none_of(d.steps.begin(), d.steps.end(), [](const Step& s) { return s.effect == "lever_arm_z"; }))
       << "second step: " << d.steps.back().effect;
   const auto& first = d.steps.front().candidates;
-  const auto lever_arm = std::find_if(first.begin(), first.end(), [](const auto& c) { return c.effect == "lever_arm_z"; });
+  const auto lever_arm =
+      std::find_if(first.begin(), first.end(), [](const auto& c) { return c.effect == "lever_arm_z"; });
   ASSERT_NE(lever_arm, first.end());
   EXPECT_LT(lever_arm->p_value, 0.01);
   EXPECT_LT(lever_arm->rmse_validation, d.base.rmse_validation);
@@ -206,15 +209,24 @@ void expect_down_to_the_clean_flight(const Diagnosis& d, Case clean_run) {
   EXPECT_LE(d.final.rmse_validation, 1.1 * clean.base.rmse_validation);
 }
 
+// What the full model can identify of an accelerometer scale error: the ratio of the two axes' readings.
+double identified_scale_ratio(const Diagnosis& d) {
+  const auto& p = d.steps.front().params;
+  return (1 + param(p, "scale.x").value) / (1 + param(p, "scale.y").value);
+}
+
+void expect_first_step_bias(const Diagnosis& d, double bias, double tolerance) {
+  EXPECT_NEAR(param(d.steps.front().params, "bias.x").value, bias, tolerance);
+  EXPECT_NEAR(param(d.steps.front().params, "bias.y").value, bias, tolerance);
+}
+
 // A scale error differing between the axes shows in the full model, whose lever arm is shared by them; the common
 // part hides in the lever arm (docs/effects.md), so only the ratio of the two axes' readings is asserted.
 TEST_P(FoundFirst, AccelScaleWithTheFullModel) {
   const Case run = without_drag("accel_scale=0.15,-0.15,0", GetParam(), "paper");
   const Diagnosis d = diagnose(run);
   ASSERT_EQ(chosen(d), std::vector<std::string>{"accel_scale"});
-  const double ratio = (1 + param(d.steps.front().params, "scale.x").value) /
-                       (1 + param(d.steps.front().params, "scale.y").value);
-  EXPECT_NEAR(ratio, 1.15 / 0.85, 0.02);
+  EXPECT_NEAR(identified_scale_ratio(d), 1.15 / 0.85, 0.02);
   expect_down_to_the_clean_flight(d, run);
 }
 
@@ -229,8 +241,7 @@ TEST_P(FoundFirst, AccelBiasInTheClimbingFlight) {
   const Case run = without_drag("accel_bias=0.5,0.5,0", GetParam(), "climb");
   const Diagnosis d = diagnose(run);
   ASSERT_EQ(chosen(d), std::vector<std::string>{"accel_bias"});
-  EXPECT_NEAR(param(d.steps.front().params, "bias.x").value, 0.5, 0.02);
-  EXPECT_NEAR(param(d.steps.front().params, "bias.y").value, 0.5, 0.02);
+  expect_first_step_bias(d, 0.5, 0.02);
   EXPECT_LE(d.final.rmse_validation, 0.75 * d.base.rmse_validation);
   expect_down_to_the_clean_flight(d, run);
 }
@@ -244,9 +255,7 @@ TEST_P(FoundFirst, AccelScaleBelowTenHertz) {
   run.lowpass_hz = 10.0;
   const Diagnosis d = diagnose(run);
   expect_found_first(d, "accel_scale");
-  const double ratio = (1 + param(d.steps.front().params, "scale.x").value) /
-                       (1 + param(d.steps.front().params, "scale.y").value);
-  EXPECT_NEAR(ratio, 1.15 / 0.85, 0.02);
+  EXPECT_NEAR(identified_scale_ratio(d), 1.15 / 0.85, 0.02);
 }
 
 TEST_P(FoundFirst, AccelBiasInTheClimbingFlightBelowTenHertz) {
@@ -254,18 +263,16 @@ TEST_P(FoundFirst, AccelBiasInTheClimbingFlightBelowTenHertz) {
   run.lowpass_hz = 10.0;
   const Diagnosis d = diagnose(run);
   expect_found_first(d, "accel_bias");
-  EXPECT_NEAR(param(d.steps.front().params, "bias.x").value, 0.5, 0.02);
-  EXPECT_NEAR(param(d.steps.front().params, "bias.y").value, 0.5, 0.02);
+  expect_first_step_bias(d, 0.5, 0.02);
 }
 
 // The tilted sensor's thrust term in the climbing flight: found first, and the error more than halved. From the IMU
 // alone `thrust` takes 47 % off and a second step (`self_consistent_velocity`: eq. (12)'s velocity drifts) the rest.
 TEST_P(FoundFirst, ThrustInTheClimbingFlight) {
-  const Diagnosis d =
-      diagnose({.sim_effects = {"imu_tilt=0.3"},
-                .velocity = GetParam(),
-                .max_steps = GetParam() == VelocitySource::kImu ? 2 : 1,
-                .scenario = "climb"});
+  const Diagnosis d = diagnose({.sim_effects = {"imu_tilt=0.3"},
+                                .velocity = GetParam(),
+                                .max_steps = GetParam() == VelocitySource::kImu ? 2 : 1,
+                                .scenario = "climb"});
   expect_found_first(d, "thrust");
 }
 
@@ -293,10 +300,8 @@ TEST_P(FoundFirst, TwoEffectsTogether) {
 // Outside the library: a vibration in a band the frequency search is told to ignore stays in the residual, which
 // is then not white, and `unexplained` names its frequency.
 TEST_P(FoundFirst, IgnoredVibrationIsReportedUnexplained) {
-  const Diagnosis d = diagnose({.sim_effects = {"vibration=37,0.3"},
-                                .velocity = GetParam(),
-                                .max_steps = 1,
-                                .ignore_bands = {{35.0, 40.0}}});
+  const Diagnosis d = diagnose(
+      {.sim_effects = {"vibration=37,0.3"}, .velocity = GetParam(), .max_steps = 1, .ignore_bands = {{35.0, 40.0}}});
   EXPECT_TRUE(std::none_of(d.steps.begin(), d.steps.end(), [](const Step& s) { return s.effect == "vibration"; }));
   EXPECT_FALSE(d.residual_white);
   // An ignored line is not unexplained (it was asked to be ignored), but it is in the analysis, marked ignored.
