@@ -71,11 +71,19 @@ void plan_sequence(double first_start_s, double gap_min_s, double gap_max_s, dou
   }
 }
 
-Manoeuvre::Kind draw_kind(Rng& rng) {
-  return static_cast<Manoeuvre::Kind>(std::min(2, static_cast<int>(rng.uniform() * 3)));
+// A manoeuvre of random kind, sign, size in [size_min, size_max), swing, hold and cycle count, drawn in the order
+// plans have always been drawn, so that seeds keep their flights.
+Manoeuvre draw_manoeuvre(Rng& rng, double size_min, double size_max, double swing_min_s, double swing_max_s,
+                         double hold_min_s, double hold_max_s) {
+  Manoeuvre m;
+  m.kind = static_cast<Manoeuvre::Kind>(std::min(2, static_cast<int>(rng.uniform() * 3)));
+  const double sign = rng.uniform() < 0.5 ? -1.0 : 1.0;
+  m.amplitude = sign * rng.uniform(size_min, size_max);
+  m.swing = rng.uniform(swing_min_s, swing_max_s);
+  m.hold = rng.uniform(hold_min_s, hold_max_s);
+  m.cycles = 2 + static_cast<int>(rng.uniform() * 2);
+  return m;
 }
-
-double draw_sign(Rng& rng) { return rng.uniform() < 0.5 ? -1.0 : 1.0; }
 
 }  // namespace
 
@@ -84,13 +92,8 @@ Trajectory plan_manoeuvres(const ManoeuvreConfig& c, double duration_s, Rng& rng
   if (!c.enabled) return plan;
   plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
     CosineCurve* curve = r.uniform() < c.roll_share ? &plan.roll : &plan.pitch;
-    Manoeuvre m;
-    m.kind = draw_kind(r);
-    const double sign = draw_sign(r);  // before the size, as plans have always been drawn: seeds keep their flights
-    m.amplitude = sign * r.uniform(c.amplitude_min_rad, c.amplitude_max_rad);
-    m.swing = r.uniform(c.swing_min_s, c.swing_max_s);
-    m.hold = r.uniform(c.hold_min_s, c.hold_max_s);
-    m.cycles = 2 + static_cast<int>(r.uniform() * 2);
+    const Manoeuvre m = draw_manoeuvre(r, c.amplitude_min_rad, c.amplitude_max_rad, c.swing_min_s, c.swing_max_s,
+                                       c.hold_min_s, c.hold_max_s);
     return std::pair{curve, m};
   });
   return plan;
@@ -100,13 +103,8 @@ CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& c, double du
   CosineCurve height;
   if (!c.enabled) return height;
   plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
-    Manoeuvre m;
-    m.kind = draw_kind(r);
-    const double sign = draw_sign(r);
-    m.amplitude = sign * r.uniform(c.height_min_m, c.height_max_m);
-    m.swing = r.uniform(c.swing_min_s, c.swing_max_s);
-    m.hold = r.uniform(c.hold_min_s, c.hold_max_s);
-    m.cycles = 2 + static_cast<int>(r.uniform() * 2);
+    Manoeuvre m =
+        draw_manoeuvre(r, c.height_min_m, c.height_max_m, c.swing_min_s, c.swing_max_s, c.hold_min_s, c.hold_max_s);
     // The largest swing (+A -> -A) peaks at A (pi / swing)^2.
     m.swing = std::max(m.swing, std::numbers::pi * std::sqrt(std::abs(m.amplitude) / c.max_acceleration_mps2));
     return std::pair{&height, m};
