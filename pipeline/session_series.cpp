@@ -59,7 +59,7 @@ Reference read_reference(const store::Store& store, std::int64_t session, Sessio
     r.velocity.push_back(row.velocity ? vector_of(*row.velocity) : Vector3d::Zero());
     r.has_all_velocities = r.has_all_velocities && row.velocity.has_value();
   });
-  if (r.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
+  if (r.t_ns.size() < 2) return r;  // no trajectory: the caller decides whether that is an error
   if (!r.has_all_velocities) {
     std::vector<double> t(r.t_ns.size());
     for (std::size_t i = 0; i < t.size(); ++i) t[i] = static_cast<double>(r.t_ns[i] - r.t_ns.front()) * 1e-9;
@@ -100,9 +100,11 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
     recv_mono_ns.push_back(s.recv_mono_ns);
   });
   if (series.size() == 0) throw std::invalid_argument(session_name(session) + " has no usable samples");
-  if (!options.reference) return out;
+  if (options.reference == ReferenceUse::none) return out;
 
   const Reference reference = read_reference(store, session, out.counts);
+  if (options.reference == ReferenceUse::when_present && out.counts.reference_rows < 2) return out;
+  if (reference.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
   estimator::ImuSeries kept;
   kept.reference.emplace();
   for (std::size_t k = 0; k < series.size(); ++k) {

@@ -10,9 +10,16 @@
 
 namespace imubridge::pipeline {
 
+// Whether the reference trajectory is interpolated at every sample.
+enum class ReferenceUse {
+  none,
+  required,      // a session without one is an error
+  when_present,  // used if the store holds at least two poses of the session, left out otherwise
+};
+
 struct SessionSeriesOptions {
   std::optional<std::int64_t> link{};  // default: the session's link with the most samples
-  bool reference = false;              // interpolate the reference trajectory at every sample
+  ReferenceUse reference = ReferenceUse::none;
 };
 
 // What was read and what was left out, and why. Nothing is dropped silently.
@@ -35,7 +42,8 @@ struct SessionSeries {
 // sample. The reference's t_ns is on the session's monotonic clock, as the samples' recv_mono_ns are, so each sample
 // takes the reference interpolated at its recv_mono_ns: velocity linearly, attitude by slerp. Poses without a
 // velocity get one from the central difference of the positions. Throws std::invalid_argument for an unknown
-// session or link, a link without samples, or a reference asked for and missing (fewer than two usable poses).
+// session or link, a link without samples, or a reference required and missing (fewer than two usable poses), or
+// present in the store (two poses or more) and unusable.
 SessionSeries read_session_series(const store::Store& store, std::int64_t session,
                                   const SessionSeriesOptions& options = {});
 

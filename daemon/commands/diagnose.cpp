@@ -70,12 +70,6 @@ std::pair<double, double> parse_band(const std::string& text) {
   return {lo, hi};
 }
 
-bool has_reference(const store::Store& store, std::int64_t session) {
-  std::size_t rows = 0;
-  store.for_each_reference(session, [&](const store::ReferenceRow&) { ++rows; });
-  return rows >= 2;
-}
-
 void print_params(const std::vector<dg::ParameterEstimate>& params) {
   for (const dg::ParameterEstimate& p : params)
     std::fprintf(stderr, "    %-16s %12.6g ± %-10.3g %s\n", p.name.c_str(), p.value, p.std_error, p.unit.c_str());
@@ -123,10 +117,13 @@ int run(const DiagnoseCliOptions& o) {
 
   const store::Store store(o.db, {.read_only = true});
   // The reference when the session has one, unless told otherwise.
-  const bool reference = o.velocity ? *options.velocity == dg::VelocitySource::kReference : has_reference(store, o.session);
-  options.velocity = reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
+  using pipeline::ReferenceUse;
+  const ReferenceUse reference = !o.velocity                                           ? ReferenceUse::when_present
+                                 : *options.velocity == dg::VelocitySource::kReference ? ReferenceUse::required
+                                                                                       : ReferenceUse::none;
   const pipeline::SessionSeries session =
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference});
+  options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
   const dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
 
   const std::filesystem::path dir(o.report);

@@ -37,8 +37,9 @@ int run(const EvaluateCliOptions& o) {
   const std::optional<est::TimeWindow> window = o.window ? std::optional(est::parse_window(*o.window)) : std::nullopt;
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = true});
-  const est::VelocityEvaluation e = est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
+      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required});
+  const est::VelocityEvaluation e =
+      est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
   const est::DragVelocityCounters& c = e.counters;
   const json out = {{"session", o.session},
                     {"link", session.link_id},

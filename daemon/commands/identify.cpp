@@ -163,7 +163,10 @@ int run(const IdentifyCliOptions& o) {
 
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session = pipeline::read_session_series(
-      store, o.session, {.link = o.link, .reference = options.velocity == est::VelocitySource::kReference});
+      store, o.session,
+      {.link = o.link,
+       .reference = options.velocity == est::VelocitySource::kReference ? pipeline::ReferenceUse::required
+                                                                        : pipeline::ReferenceUse::none});
   const est::IdentifyResult result = est::identify(session.series, options);
 
   write_text(o.out, nlohmann::json(result.params).dump(2) + "\n");
