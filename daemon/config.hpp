@@ -43,6 +43,7 @@ struct LinkConfig {
   protocol::WireFormat format = protocol::WireFormat::imubridge;
   std::uint32_t baud = 115200;
   protocol::Calibration calibration = protocol::Calibration::reference_board();
+  std::string axes = "auto";  // the IMU's axes in the body (estimator::parse_imu_axes): auto detects from gravity
   std::vector<Endpoint> bridge;  // raw bytes forwarded both ways (e.g. QGroundControl on udp://127.0.0.1:14550)
   VehicleFeedbackConfig feedback;
   std::chrono::milliseconds reconnect_min{200}, reconnect_max{5000};  // retry backoff after the port vanishes

@@ -15,6 +15,7 @@
 
 #include "daemon/endpoint.hpp"
 #include "daemon/vehicle_feedback.hpp"
+#include "estimator/imu_axes.hpp"
 #include "pipeline/session_config.hpp"
 #include "protocol/hex.hpp"
 
@@ -305,6 +306,14 @@ LinkConfig read_link(Table& t) {
   }
   if (auto baud = t.integer("baud", 1, 100'000'000)) link.baud = static_cast<std::uint32_t>(*baud);
   link.calibration = read_calibration(t);
+  if (auto axes = t.string("axes")) {
+    try {
+      estimator::parse_imu_axes(*axes);
+      link.axes = *axes;
+    } catch (const std::invalid_argument& e) {
+      t.fail("axes", e.what());
+    }
+  }
   link.bridge = t.endpoints("bridge");
   if (auto feedback = t.table("feedback")) {
     link.feedback.enabled = feedback->boolean("enabled").value_or(true);
@@ -459,6 +468,7 @@ std::string to_toml(const Config& config) {
         {"name", l.name},
         {"protocol", std::string(protocol::wire_format_name(l.format))},
         {"baud", static_cast<std::int64_t>(l.baud)},
+        {"axes", l.axes},
         {"reconnect_min_ms", static_cast<std::int64_t>(l.reconnect_min.count())},
         {"reconnect_max_ms", static_cast<std::int64_t>(l.reconnect_max.count())},
         {"bridge", endpoint_texts(l.bridge)},

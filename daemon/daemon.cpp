@@ -10,6 +10,7 @@
 #include <csignal>
 #include <ctime>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -90,6 +91,12 @@ estimator::ModelParams load_params(const fs::path& path) {
   return replay::parse_params(text.str(), path.string());
 }
 
+void save_params(const fs::path& path, const estimator::ModelParams& params) {
+  std::ofstream out(path, std::ios::trunc);
+  out << nlohmann::json(params).dump(2) << "\n";
+  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
+}
+
 void configure_logging(const Config& config) {
   spdlog::sink_ptr sink;
   if (config.log_file) {
@@ -149,7 +156,34 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       stats_timer_(io_),
       watchdog_timer_(io_) {
   signals_.add(SIGUSR1);
-  estimation_ = std::make_unique<pipeline::EstimationStage>(params_);  // bad parameters fail here, before any I/O
+  // Each link's declared IMU axes; XBee radios (ids with the top bit) take their link's. Detection reports once per
+  // link: a declaration the data contradict is logged and recorded as an event.
+  pipeline::StageAxes axes;
+  axes.declared = [this](std::uint32_t id) {
+    const std::size_t i = id & 0x80000000u ? (id >> 16) & 0x7fffu : links_.size();
+    for (std::size_t k = 0; k < links_.size(); ++k) {
+      if (k == i || (i == links_.size() && links_[k]->store_link == static_cast<std::int64_t>(id))) {
+        return estimator::parse_imu_axes(links_[k]->config.axes);  // checked when the config was read
+      }
+    }
+    return estimator::auto_axes();
+  };
+  axes.on_resolved = [this](std::uint32_t id, const estimator::AxesResolution& resolution) {
+    spdlog::info("link {}: {}", id, resolution.description);
+    if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
+    if (!resolution.mismatch) return;
+    spdlog::warn("link {}: {}", id, *resolution.mismatch);
+    const std::int64_t link = id & 0x80000000u ? links_[(id >> 16) & 0x7fffu]->store_link : id;
+    record([&](Recording& r) {
+      r.store.append_event(r.session, {.link_id = link,
+                                       .mono_ns = mono_now_ns(),
+                                       .wall_ns = wall_now_ns(),
+                                       .kind = "imu_axes_mismatch",
+                                       .detail = *resolution.mismatch});
+    });
+  };
+  // Bad parameters fail here, before any I/O.
+  estimation_ = std::make_unique<pipeline::EstimationStage>(params_, std::move(axes));
   outputs_ = std::make_unique<Outputs>(io_, config_.outputs);
   for (const LinkConfig& link_config : config_.links) {
     auto link = std::make_unique<Link>();
@@ -205,7 +239,7 @@ void Daemon::open_recording(const fs::path& path, const std::string& continues) 
   std::vector<pipeline::RecordedLink> recorded;
   std::string source = "imubridge run:";
   for (const auto& link : links_) {
-    recorded.push_back({link->config.name, link->config.format, link->config.calibration});
+    recorded.push_back({link->config.name, link->config.format, link->config.calibration, link->config.axes});
     source += fmt::format(" {} {} ({} @ {} baud);", link->config.name, describe(link->config.device),
                           protocol::wire_format_name(link->config.format), link->config.baud);
   }
@@ -235,7 +269,7 @@ void Daemon::open_recording(const fs::path& path, const std::string& continues) 
     links_[i]->recorder = std::move(recorders[i]);
   }
   // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
-  estimation_ = std::make_unique<pipeline::EstimationStage>(params_);
+  estimation_ = std::make_unique<pipeline::EstimationStage>(params_, *estimation_->axes());
   spdlog::info("recording session {} into {}{}", r->session, path.string(),
                config_.params ? " with parameters from " + config_.params->string()
                               : " (no parameters: velocity is not estimated)");
@@ -253,9 +287,10 @@ void Daemon::close_recording() {
     for (auto& link : links_) {
       tail.clear();
       link->recorder->finish(mono, wall, tail);
-      for (const auto& sample : tail) {
-        if (const auto estimate = estimation_->update(sample)) r->store.append_estimate(r->run, *estimate);
-      }
+      std::vector<store::Estimate> estimates;
+      for (const auto& sample : tail) estimation_->update(sample, estimates);
+      estimation_->finish(estimates);  // links still waiting for their axes
+      for (const auto& estimate : estimates) r->store.append_estimate(r->run, estimate);
     }
     r->store.end_session(r->session, wall);
     r->store.commit();
@@ -387,15 +422,17 @@ void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
 void Daemon::process(Link& link, std::int64_t mono_ns) {
   link.samples += samples_.size();
   for (const protocol::Sample& sample : samples_) {
-    const std::optional<store::Estimate> estimate = estimation_->update(sample);
-    if (estimate) {
+    // Usually none or one; a link waiting for its IMU axes releases its first samples' estimates at once.
+    estimates_.clear();
+    estimation_->update(sample, estimates_);
+    for (const store::Estimate& estimate : estimates_) {
       ++link.estimates;
-      record([&](Recording& r) { r.store.append_estimate(r.run, *estimate); });
+      record([&](Recording& r) { r.store.append_estimate(r.run, estimate); });
       if (link.feedback) {
-        if (auto bytes = link.feedback->on_estimate(*estimate, mono_ns)) write_to_link(link, *bytes);
+        if (auto bytes = link.feedback->on_estimate(estimate, mono_ns)) write_to_link(link, *bytes);
       }
     }
-    outputs_->publish(link.config.name, sample, estimate ? &*estimate : nullptr);
+    outputs_->publish(link.config.name, sample, estimates_.empty() ? nullptr : &estimates_.back());
   }
 }
 

@@ -20,6 +20,7 @@
 #include "daemon/systemd_notify.hpp"
 #include "estimator/params.hpp"
 #include "protocol/sample.hpp"
+#include "store/records.hpp"
 
 namespace imubridge::pipeline {
 class EstimationStage;
@@ -31,6 +32,8 @@ class Outputs;
 
 // PARAMS.json as `imubridge identify` writes it. Throws std::invalid_argument naming the file and what is wrong.
 estimator::ModelParams load_params(const std::filesystem::path& path);
+// PARAMS.json, indented, to `path`. Throws std::runtime_error when it cannot be written.
+void save_params(const std::filesystem::path& path, const estimator::ModelParams& params);
 
 // spdlog's default logger for the daemon: config.log_file if set, else stderr; on the journal, lines carry a syslog
 // priority instead of a timestamp (journald keeps its own). Called again on SIGHUP, which reopens the file.
@@ -97,6 +100,7 @@ class Daemon {
   std::unique_ptr<pipeline::EstimationStage> estimation_;
   std::vector<std::unique_ptr<Link>> links_;
   std::vector<protocol::Sample> samples_;  // of the chunk being processed: reused, so a chunk allocates nothing
+  std::vector<store::Estimate> estimates_;  // of the sample being processed: reused likewise
   std::uint64_t commits_ = 0, rotations_ = 0;
   bool stopping_ = false;
 };

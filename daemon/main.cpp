@@ -9,6 +9,7 @@
 #include <string>
 
 #include "daemon/command.hpp"
+#include "estimator/solver_logs.hpp"
 
 namespace imubridge::cli {
 std::vector<CommandRegistration>& command_registry() {
@@ -19,6 +20,7 @@ std::vector<CommandRegistration>& command_registry() {
 
 int main(int argc, char** argv) {
   using namespace imubridge::cli;
+  imubridge::estimator::route_solver_logs_to_spdlog();
   CLI::App app{"imubridge " IMUBRIDGE_VERSION
                " - records quadrotor IMU serial streams into SQLite and estimates velocity from them"};
   app.require_subcommand(1);

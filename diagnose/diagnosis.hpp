@@ -7,6 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "estimator/params.hpp"
+#include "estimator/velocity_scores.hpp"
+
 namespace imubridge::diagnose {
 
 // ---- residual analysis (residual_analysis.hpp computes it) ----
@@ -69,6 +72,13 @@ struct ModelFit {
   double rmse_train = 0.0;       // m/s^2, over the axes diagnosed
   double rmse_validation = 0.0;  // m/s^2
   std::vector<double> convergence;  // cost (sqrt of the sum of squared residuals) after each solver iteration
+  // Parameters at or within 1 % of a bound of their search range: the data pushed them there, so their value says
+  // more about the range than about the vehicle. One readable line each.
+  std::vector<std::string> at_bounds;
+  // Values beyond the plausibility table (estimator/plausibility.hpp), one line each (a candidate with any is refused;
+  // the base model is reported with them).
+  std::vector<std::string> implausible;
+  std::optional<estimator::VelocityScores> velocity;  // the estimator run with this model; with a reference only
 };
 
 // One candidate tried at one step of the greedy search.
@@ -79,7 +89,11 @@ struct CandidateTrial {
   double statistic = 0.0;  // the significance rule's statistic (docs/diagnose.md)
   double p_value = 1.0;
   bool significant = false;
-  std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit)
+  // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level) or the
+  // minimum-gain rule (its gain against the minimum). Empty for the one added.
+  std::string rejected_by;
+  std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit,
+                        // physically implausible)
 };
 
 struct Step {
@@ -127,6 +141,12 @@ struct Diagnosis {
   bool residual_white = false;  // every axis's final validation residual passes Ljung-Box
   std::vector<Unexplained> unexplained;
   std::vector<AxisSeries> series;
+  // Zero velocity's error (m/s): the floor any velocity estimate must beat. With a reference only.
+  std::optional<estimator::VelocityScores> zero_velocity;
+  // The final model as the live estimator runs it (PARAMS.json).
+  estimator::ModelParams final_params;
+  std::vector<std::string> warnings;  // e.g. the IMU axes disagreeing with the data; shown first
+  std::string imu_axes;               // how the samples were turned into body axes (declared or detected)
 };
 
 }  // namespace imubridge::diagnose

@@ -63,10 +63,24 @@ json fit_parameters_json(const ModelFit& fit) {
   return list;
 }
 
+json score_json(const estimator::VelocityError& s) {
+  return {{"x", number(s.axis.x())}, {"y", number(s.axis.y())}, {"horizontal", number(s.horizontal)}};
+}
+
+json velocity_json(const std::optional<estimator::VelocityScores>& v) {
+  if (!v) return nullptr;
+  json out = {{"train", score_json(v->train)}, {"validation", score_json(v->validation)}};
+  if (!v->note.empty()) out["note"] = v->note;
+  return out;
+}
+
 json model_json(const ModelFit& fit) {
   return {{"effects", fit.effects},
           {"params", fit_parameters_json(fit)},
           {"free_parameters", fit.free_parameters},
+          {"velocity_rmse_m_s", velocity_json(fit.velocity)},
+          {"at_bounds", fit.at_bounds},
+          {"implausible", fit.implausible},
           {"convergence", numbers(fit.convergence)}};
 }
 
@@ -124,6 +138,7 @@ json fit_json(const Diagnosis& d, const ModelFit& fit, const std::vector<Residua
   json out = model_json(fit);
   out["rmse_train"] = number(fit.rmse_train);
   out["rmse_validation"] = number(fit.rmse_validation);
+  out["velocity_rmse_m_s"] = velocity_json(fit.velocity);
   out["residual"] = residuals_json(d, residual);
   out["residual_white"] = whiteness(residual);
   return out;
@@ -138,6 +153,7 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
                     {"statistic", number(c.statistic)},
                     {"p_value", number(c.p_value)},
                     {"significant", c.significant},
+                    {"rejected_by", c.rejected_by},
                     {"skipped", c.skipped}});
   }
   return list;
@@ -150,6 +166,7 @@ json step_json(const Diagnosis& d, const Step& step) {
           {"rmse_validation", number(step.fit.rmse_validation)},
           {"rmse_train_before", number(step.rmse_train_before)},
           {"rmse_validation_before", number(step.rmse_validation_before)},
+          {"velocity_rmse_m_s", velocity_json(step.fit.velocity)},
           {"residual_white", whiteness(step.residual)},
           {"residual", residuals_json(d, step.residual)},
           {"candidates", candidates_json(step.candidates)},
@@ -632,11 +649,24 @@ void summary_section(const Diagnosis& d, Page& page) {
   page.table({}, {{"Session", escape(d.session)},
                   {"Base model", escape(d.model)},
                   {"Axes", escape(join(d.axes, ", "))},
+                  {"IMU axes", escape(d.imu_axes)},
                   {"Velocity source", escape(d.velocity_source)},
                   {"Training window", window_text(d.train_start, d.train_end)},
                   {"Validation window", window_text(d.validate_start, d.validate_end)},
                   {"Significance rule", escape(d.significance_rule)},
-                  {"Result", result}});
+                  {"Result", result},
+                  {"Velocity", escape(summary_line(d))}});
+  std::vector<std::string> flags = d.warnings;
+  for (const ModelFit* fit : {&d.base, &d.final}) {
+    const std::string which = fit == &d.base ? "base: " : "final: ";
+    for (const auto& b : fit->at_bounds) flags.push_back(which + b);
+    for (const auto& b : fit->implausible) flags.push_back(which + "implausible: " + b);
+  }
+  if (!flags.empty()) {
+    page.add("<div class=\"banner bad\"><strong>Check these</strong><ul>");
+    for (const auto& f : flags) page.add("<li>" + escape(f) + "</li>");
+    page.add("</ul></div>\n");
+  }
 }
 
 void banner(const Diagnosis& d, Page& page) {
@@ -668,28 +698,43 @@ void search_section(const Diagnosis& d, Page& page) {
       "over the axes diagnosed, in m/s²; whiteness is the Ljung–Box test on the validation residual.");
   std::vector<std::vector<std::string>> rows;
   std::vector<std::string> classes;
+  const auto velocity = [](const ModelFit& fit, bool validation) -> std::string {
+    if (!fit.velocity) return "";
+    const estimator::VelocityError& s = validation ? fit.velocity->validation : fit.velocity->train;
+    return num(s.horizontal, 3) + " (" + num(s.axis.x(), 3) + ", " + num(s.axis.y(), 3) + ")" +
+           (fit.velocity->note.empty() ? "" : " *");
+  };
   rows.push_back({"0", "base model (" + escape(d.model) + ")", parameters_cell(d.base.base_params),
                   std::to_string(d.base.free_parameters), num(d.base.rmse_train), num(d.base.rmse_validation), "",
-                  whiteness_cell(d, d.base_residual)});
+                  velocity(d.base, false), velocity(d.base, true), whiteness_cell(d, d.base_residual)});
   classes.emplace_back();
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const auto& step = d.steps[i];
     rows.push_back({std::to_string(i + 1), "+ " + escape(step.effect), parameters_cell(step.params),
                     std::to_string(step.fit.free_parameters), num(step.fit.rmse_train), num(step.fit.rmse_validation),
                     percent_change(step.rmse_validation_before, step.fit.rmse_validation),
-                    whiteness_cell(d, step.residual)});
+                    velocity(step.fit, false), velocity(step.fit, true), whiteness_cell(d, step.residual)});
     classes.emplace_back();
   }
   std::vector<std::string> model{"base model"};
   for (const auto& effect : d.final.effects) model.push_back("<span class=\"nw\">+ " + escape(effect) + "</span>");
   rows.push_back({"final", join(model, "<br>"), "see Final model parameters", std::to_string(d.final.free_parameters),
                   num(d.final.rmse_train), num(d.final.rmse_validation),
-                  percent_change(d.base.rmse_validation, d.final.rmse_validation),
-                  whiteness_cell(d, d.final_residual)});
+                  percent_change(d.base.rmse_validation, d.final.rmse_validation), velocity(d.final, false),
+                  velocity(d.final, true), whiteness_cell(d, d.final_residual)});
   classes.emplace_back("final");
   page.table({"Step", "Model", "Parameters added (± standard error)", "Free params", "RMSE train", "RMSE validation",
-              "Δ validation", "Residual"},
+              "Δ validation", "Velocity RMSE train (m/s)", "Velocity RMSE validation (m/s)", "Residual"},
              rows, classes);
+  if (d.zero_velocity) {
+    page.paragraph("Velocity RMSE: the drag-velocity estimator run with each step's model (horizontal (x, y), against "
+                   "the reference; zero velocity scores " +
+                       num(d.zero_velocity->train.horizontal, 3) + " on the training and " +
+                       num(d.zero_velocity->validation.horizontal, 3) +
+                       " m/s on the validation window). * a model without a drag law on an axis gives no velocity: "
+                       "scored as zero velocity.",
+                   "note");
+  }
 }
 
 void unexplained_section(const Diagnosis& d, Page& page) {
@@ -780,7 +825,7 @@ void candidates_table(const std::vector<CandidateTrial>& candidates, const std::
     rows.push_back({escape(c.effect), tried ? num(c.rmse_train) : "", tried ? num(c.rmse_validation) : "",
                     tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
                     tried ? (c.significant ? "yes" : "no") : "",
-                    is_chosen ? "chosen" : escape(tried ? "" : "not tried: " + c.skipped)});
+                    is_chosen ? "chosen" : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});
     classes.emplace_back(is_chosen ? "chosen" : "");
   }
   if (rows.empty()) {
@@ -836,6 +881,40 @@ void write_text(const std::filesystem::path& file, const std::string& text) {
 
 }  // namespace
 
+std::string summary_line(const Diagnosis& d) {
+  char text[400];
+  std::string line;
+  if (d.base.velocity && d.final.velocity) {
+    std::snprintf(text, sizeof text, "velocity RMSE on the validation window %.3f -> %.3f m/s (horizontal; x %.3f -> %.3f, y %.3f -> %.3f",
+                  d.base.velocity->validation.horizontal, d.final.velocity->validation.horizontal,
+                  d.base.velocity->validation.axis.x(), d.final.velocity->validation.axis.x(),
+                  d.base.velocity->validation.axis.y(), d.final.velocity->validation.axis.y());
+    line = text;
+    if (d.zero_velocity) {
+      std::snprintf(text, sizeof text, "; zero velocity %.3f", d.zero_velocity->validation.horizontal);
+      line += text;
+    }
+    line += ")";
+    if (!d.base.velocity->note.empty()) line += " [base: " + d.base.velocity->note + "]";
+    if (!d.final.velocity->note.empty()) line += " [final: " + d.final.velocity->note + "]";
+    line += "; ";
+  } else {
+    line = "no reference velocity, so no velocity error; ";
+  }
+  std::snprintf(text, sizeof text, "specific-force residual %.4f -> %.4f m/s^2; ", d.base.rmse_validation,
+                d.final.rmse_validation);
+  line += text;
+  if (d.steps.empty()) {
+    line += "no effect added";
+  } else {
+    std::vector<std::string> effects;
+    for (const auto& step : d.steps) effects.push_back(step.effect);
+    line += std::to_string(d.steps.size()) + (d.steps.size() == 1 ? " effect added (" : " effects added (") +
+            join(effects, ", ") + ")";
+  }
+  return line;
+}
+
 nlohmann::json report_json(const Diagnosis& d) {
   json steps = json::array();
   for (const auto& step : d.steps) steps.push_back(step_json(d, step));
@@ -849,6 +928,10 @@ nlohmann::json report_json(const Diagnosis& d) {
                       {"t_end", s.t.empty() ? json(nullptr) : number(s.t.back())}});
   }
   return {{"session", d.session},
+          {"summary", summary_line(d)},
+          {"warnings", d.warnings},
+          {"imu_axes", d.imu_axes},
+          {"zero_velocity_rmse_m_s", velocity_json(d.zero_velocity)},
           {"model", d.model},
           {"axes", d.axes},
           {"velocity_source", d.velocity_source},

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "diagnose/diagnosis.hpp"
 
@@ -19,6 +20,10 @@ inline constexpr std::size_t kReportTopEntries = 5;
 // (rms, mean, Ljung-Box, top peaks and correlations, trend); numbers that are not finite (a standard error the
 // covariance could not give) are null.
 nlohmann::json report_json(const Diagnosis& diagnosis);
+
+// One line a person reads first: the velocity error before and after the loop (when there is a reference), the
+// specific-force residual beside it, and the effects added. The report's summary and the command's stderr share it.
+std::string summary_line(const Diagnosis& diagnosis);
 
 // report_json(), indented, to `file`. Throws std::invalid_argument when the file cannot be written.
 void write_report_json(const Diagnosis& diagnosis, const std::filesystem::path& file);

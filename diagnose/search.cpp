@@ -9,10 +9,13 @@
 #include <stdexcept>
 
 #include "diagnose/effects/library.hpp"
+#include "diagnose/live_model.hpp"
 #include "diagnose/model.hpp"
 #include "diagnose/residual_analysis.hpp"
 #include "diagnose/signals.hpp"
 #include "estimator/identify.hpp"
+#include "estimator/plausibility.hpp"
+#include "estimator/velocity_scores.hpp"
 
 namespace imubridge::diagnose {
 namespace {
@@ -71,6 +74,7 @@ struct State {
   FitOutcome fit;
   ModelFit summary;
   AxisValues train_residual, validation_residual;
+  std::vector<std::string> implausible_limits;  // the plausibility limits this model already exceeds
 };
 
 std::vector<std::string> names_of(const std::vector<const Effect*>& effects) {
@@ -83,8 +87,24 @@ ParameterEstimate estimate(const Parameter& p, const FitOutcome& fit, std::size_
   return {p.name, fit.values[i], fit.std_errors[i], p.unit};
 }
 
+std::vector<std::string> at_bounds(const Model& model, std::span<const double> values) {
+  std::vector<std::string> owners;
+  for (std::size_t i = 0; i < model.parameters().size(); ++i) {
+    std::string owner = "base";
+    for (std::size_t e = 0; e < model.effects().size() && i >= model.base_size(); ++e) {
+      if (i < model.effect_offset(e) + model.effect_size(e)) {
+        owner = model.effects()[e]->name();
+        break;
+      }
+    }
+    owners.push_back(owner);
+  }
+  return parameters_at_bounds(model.parameters(), values, owners);
+}
+
 ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range validation) {
   ModelFit out;
+  out.at_bounds = at_bounds(model, fit.values);
   out.effects = names_of(model.effects());
   const std::vector<Parameter>& params = model.parameters();
   for (std::size_t i = 0; i < model.base_size(); ++i) out.base_params.push_back(estimate(params[i], fit, i));
@@ -148,6 +168,27 @@ std::string describe_rule(const DiagnoseOptions& o) {
 
 }  // namespace
 
+std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params, std::span<const double> values,
+                                              std::span<const std::string> owners) {
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    const Parameter& p = params[i];
+    const bool two_sided = std::isfinite(p.lower) && std::isfinite(p.upper);
+    const auto near = [&](double bound) {
+      const double scale = two_sided ? p.upper - p.lower : std::abs(bound);
+      return std::isfinite(bound) && std::abs(values[i] - bound) <= kAtBoundFraction * scale;
+    };
+    const bool lower = near(p.lower), upper = near(p.upper);
+    if (!lower && !upper) continue;
+    char text[240];
+    std::snprintf(text, sizeof text, "%s %s = %.6g %s is at its %s bound %g: the data pushed it to the edge of its range",
+                  owners[i].c_str(), p.name.c_str(), values[i], p.unit.c_str(), lower ? "lower" : "upper",
+                  lower ? p.lower : p.upper);
+    out.push_back(text);
+  }
+  return out;
+}
+
 FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff) {
   FTest out;
   const double q = static_cast<double>(std::max<std::size_t>(added, 1));
@@ -203,7 +244,22 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
 
   const Model base_model(signals, setup);
   State current = settle(base_model, fit(base_model, base_model.base_start(train), train), train, validation);
+  // The model as the live estimator would run it, with what it does for the velocity and whether it is plausible.
+  const auto live = [&](const Model& model, const FitOutcome& fit) {
+    return live_params(model, fit.values, fit.std_errors, train, validation);
+  };
+  const auto judge = [&](const Model& model, State& state) {
+    const estimator::ModelParams params = live(model, state.fit);
+    state.summary.velocity = estimator::score_velocity(series, params, windows);
+    for (const estimator::Implausibility& i : estimator::check_plausibility(params.full, options.limits)) {
+      state.summary.implausible.push_back(i.message);
+      state.implausible_limits.push_back(i.limit);
+    }
+  };
+  judge(base_model, current);
   out.base = current.summary;
+  if (series.reference)
+    out.zero_velocity = estimator::zero_velocity_scores(series, live(base_model, current.fit).full.mounting, windows);
   out.base_residual = analyse(base_model, current, validation, options);
   const AxisValues base_validation_residual = current.validation_residual;
 
@@ -246,6 +302,19 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           trial.skipped = *why;
           return {trial, std::nullopt};
         }
+        // Refused for what it makes implausible; a limit the current model already exceeds (its base, say) is
+        // flagged there and would otherwise block every step.
+        std::vector<estimator::Implausibility> implausible;
+        for (estimator::Implausibility& i : estimator::check_plausibility(live(model, best).full, options.limits)) {
+          if (std::find(current.implausible_limits.begin(), current.implausible_limits.end(), i.limit) ==
+              current.implausible_limits.end())
+            implausible.push_back(std::move(i));
+        }
+        if (!implausible.empty()) {
+          trial.skipped = "implausible: " + implausible.front().message;
+          for (std::size_t i = 1; i < implausible.size(); ++i) trial.skipped += "; " + implausible[i].message;
+          return {trial, std::nullopt};
+        }
         State candidate = settle(model, std::move(best), train, validation);
         trial.rmse_train = candidate.summary.rmse_train;
         trial.rmse_validation = candidate.summary.rmse_validation;
@@ -273,10 +342,23 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     const std::size_t tried = static_cast<std::size_t>(
         std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
     const double rmse_before = current.summary.rmse_validation;
+    const double level = options.significance / static_cast<double>(std::max<std::size_t>(tried, 1));
     for (CandidateTrial& t : trials) {
       if (!t.skipped.empty()) continue;
       const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
-      t.significant = improves && t.p_value < options.significance / static_cast<double>(tried);
+      const bool passes_f_test = t.p_value < level;
+      t.significant = improves && passes_f_test;
+      char why[260];
+      if (!improves) {
+        std::snprintf(why, sizeof why,
+                      "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
+                      100.0 * (t.rmse_validation / rmse_before - 1.0), 100.0 * options.min_improvement);
+        t.rejected_by = why;
+      } else if (!passes_f_test) {
+        std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
+                      options.significance, tried);
+        t.rejected_by = why;
+      }
     }
     // Best validation RMSE first; the skipped after, in library order.
     std::vector<std::size_t> order(trials.size());
@@ -298,6 +380,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     s.rmse_train_before = current.summary.rmse_train;
     s.rmse_validation_before = rmse_before;
     current = std::move(*fitted[order.front()]);
+    judge(Model(signals, setup, current.effects), current);
     s.fit = current.summary;
     s.params = current.summary.effect_params.back();
     s.candidates = std::move(sorted);
@@ -307,6 +390,10 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   }
 
   out.final = current.summary;
+  {
+    const Model final_model(signals, setup, current.effects);
+    out.final_params = live(final_model, current.fit);
+  }
   out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
   out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
                                    [](const ResidualAnalysis& a) { return a.white; });

@@ -14,6 +14,7 @@
 #include "diagnose/effects/effect.hpp"
 #include "estimator/imu_series.hpp"
 #include "estimator/params.hpp"
+#include "estimator/plausibility.hpp"
 
 namespace imubridge::diagnose {
 
@@ -34,6 +35,8 @@ struct DiagnoseOptions {
   double significance = 0.01;
   double min_improvement = 0.02;
   std::string session;  // how the report names the data
+  // A candidate whose fitted values exceed these is refused, whatever its gain.
+  estimator::PlausibilityLimits limits;
 };
 
 // Throws std::invalid_argument for an invalid series, bad options (no axis, a window without data, a reference
@@ -49,6 +52,14 @@ struct FTest {
   double p_value = 1.0;
 };
 FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff);
+
+// A parameter within this fraction of its search range (or of the bound's size, for a one-sided range) is "at the
+// bound": the data pushed it to the edge, so its value says more about the range than about the vehicle.
+inline constexpr double kAtBoundFraction = 0.01;
+// One readable line per parameter at a bound, "<owner> <name> = <value> <unit> is at its lower bound 0: ...";
+// owners[i] names parameter i's effect (or "base").
+std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params, std::span<const double> values,
+                                              std::span<const std::string> owners);
 
 // n / (1 + 2 sum_k rho_k): the number of independent samples a correlated series is worth (Bartlett), with the sum
 // over the initial run of positive autocorrelations up to max_lag. Between 1 and n.

@@ -1,9 +1,8 @@
 #include "estimator/drag_velocity.hpp"
 
-#include <limits>
-
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -62,6 +61,33 @@ DragVelocityEstimator::DragVelocityEstimator(const FullModelParams& params, cons
   initial_std << config.initial_velocity_std, config.initial_velocity_std, config.initial_tilt_std,
       config.initial_tilt_std, config.initial_gyro_bias_std, config.initial_gyro_bias_std;
   p_ = initial_std.array().square().matrix().asDiagonal();
+  if (params_.time_offset != 0.0) ring_.resize(kAlignerCapacity);
+  windy_ = params_.wind != Eigen::Vector2d::Zero();
+  heading_cos_ = std::cos(params_.wind_heading);
+  heading_sin_ = std::sin(params_.wind_heading);
+}
+
+bool DragVelocityEstimator::align(ImuSample& sample) {
+  const bool gyro_late = params_.time_offset > 0.0;  // the gyro of t - time_offset is in the past: delay it
+  const std::size_t capacity = ring_.size();
+  ring_[ring_sequence_ % capacity] = {sample.t, gyro_late ? sample.gyro : sample.accel};
+  ++ring_sequence_;
+  ring_size_ = std::min(ring_size_ + 1, capacity);
+  const std::uint64_t oldest = ring_sequence_ - ring_size_;
+  const auto at = [&](std::uint64_t n) -> const Stamped& { return ring_[n % capacity]; };
+
+  // Query times only increase, so the cursor only moves forward: amortised O(1).
+  const double query = sample.t - std::abs(params_.time_offset);
+  ring_cursor_ = std::max(ring_cursor_, oldest);
+  if (at(ring_cursor_).t > query) return false;  // not |time_offset| of history yet
+  while (ring_cursor_ + 1 < ring_sequence_ && at(ring_cursor_ + 1).t <= query) ++ring_cursor_;
+  // The current sample is newer than the query, so the bracket's upper end exists.
+  const Stamped& before = at(ring_cursor_);
+  const Stamped& after = at(ring_cursor_ + 1);
+  const Eigen::Vector3d value =
+      before.value + (after.value - before.value) * ((query - before.t) / (after.t - before.t));
+  (gyro_late ? sample.gyro : sample.accel) = value;
+  return true;
 }
 
 std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSample& sample) {
@@ -83,13 +109,23 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     ++counters_.gaps;
     differentiator_.reset();
     head_ = 0;
+    ring_sequence_ = ring_cursor_ = 0;  // no interpolation across the gap
+    ring_size_ = 0;
   }
   last_input_t_ = sample.t;
 
+  // The identified gyro bias goes first: everything downstream (alignment, differentiation, compensation,
+  // propagation) wants the rate itself; the filter's bias states then track what is left.
+  ImuSample input{sample.t, sample.gyro - params_.gyro_bias, sample.accel};
+  if (!ring_.empty() && !align(input)) {
+    ++counters_.aligning;
+    return std::nullopt;
+  }
+
   const int window = differentiator_.window();
-  history_[head_] = sample;
+  history_[head_] = input;
   head_ = (head_ + 1) % window;
-  const std::optional<Eigen::Vector3d> gyro_rate = differentiator_.update(sample.t, sample.gyro);
+  const std::optional<Eigen::Vector3d> gyro_rate = differentiator_.update(input.t, input.gyro);
   if (!gyro_rate) return std::nullopt;
   // The window is full: the oldest sample sits at head_, the centre delay_samples() after it.
   const ImuSample& centre = history_[(head_ + delay_samples()) % window];
@@ -110,6 +146,15 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   out.t = centre.t;
   out.f = f_cm.head<2>();
   const double f_var = config_.accel_noise * config_.accel_noise;
+  // With wind the drag inverts to the air velocity; the state and the output stay the ground velocity. The wind's
+  // projection is linearised once, at the prediction, for both axes' updates.
+  Eigen::Vector2d wind = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d wind_jacobian;
+  Eigen::Vector2d predicted_tilt = Eigen::Vector2d::Zero();
+  if (windy_) {
+    wind = wind_in_body(&wind_jacobian);
+    predicted_tilt = x_.segment<2>(2);
+  }
   for (int axis = 0; axis < 2; ++axis) {
     out.f_var[axis] = f_var;
     if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
@@ -122,7 +167,14 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     const double slope = drag_slope(k, mu, v_raw);
     out.v_raw[axis] = v_raw;
     out.v_raw_var[axis] = f_var / (slope * slope);
-    fuse_velocity(axis, v_raw);
+    if (windy_) {
+      out.v_raw[axis] = v_raw + wind[axis];
+      // The first axis's update moved the tilt: carry the wind's projection along to first order.
+      const double wind_now = wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt);
+      fuse_air_velocity(axis, v_raw, wind_now, wind_jacobian.row(axis).transpose());
+    } else {
+      fuse_velocity(axis, v_raw);
+    }
     out.v[axis] = x_[axis];
     out.v_var[axis] = p_(axis, axis);
   }
@@ -139,23 +191,92 @@ void DragVelocityEstimator::predict(double dt, const Eigen::Vector3d& w_measured
   const double gz = std::sqrt(std::max(1.0 - gx * gx - gy * gy, kMinGammaZ * kMinGammaZ));
   const double kx = params_.drag_linear.x(), ky = params_.drag_linear.y();
   const double mux = params_.drag_quadratic.x(), muy = params_.drag_quadratic.y();
+  // Drag acts on the air velocity, v - R^T w; without wind that is v itself, and the arithmetic below is the same.
+  double ax = vx, ay = vy;
+  Eigen::Matrix2d wind_jacobian;
+  if (windy_) {
+    const Eigen::Vector2d wind = wind_in_body(&wind_jacobian);
+    ax = vx - wind.x();
+    ay = vy - wind.y();
+  }
 
   // Body-frame velocity: v_dot = drag(v) + g*gamma - w x v (horizontal rows; the w x v terms through the small
   // vertical body velocity are left to the process noise). Gravity direction in body axes: gamma_dot = -w x gamma.
   Vector6d x_dot;
-  x_dot << drag_specific_force(kx, mux, vx) + kGravity * gx + wz * vy,
-      drag_specific_force(ky, muy, vy) + kGravity * gy - wz * vx, wz * gy - wy * gz, wx * gz - wz * gx, 0.0, 0.0;
+  x_dot << drag_specific_force(kx, mux, ax) + kGravity * gx + wz * vy,
+      drag_specific_force(ky, muy, ay) + kGravity * gy - wz * vx, wz * gy - wy * gz, wx * gz - wz * gx, 0.0, 0.0;
 
   Matrix6d a = Matrix6d::Zero();
-  a.row(0) << -drag_slope(kx, mux, vx), wz, kGravity, 0.0, 0.0, 0.0;
-  a.row(1) << -wz, -drag_slope(ky, muy, vy), 0.0, kGravity, 0.0, 0.0;
+  a.row(0) << -drag_slope(kx, mux, ax), wz, kGravity, 0.0, 0.0, 0.0;
+  a.row(1) << -wz, -drag_slope(ky, muy, ay), 0.0, kGravity, 0.0, 0.0;
   a.row(2) << 0.0, 0.0, wy * gx / gz, wz + wy * gy / gz, 0.0, gz;
   a.row(3) << 0.0, 0.0, -wz - wx * gx / gz, -wx * gy / gz, -gz, 0.0;
+  if (windy_) {
+    // d drag(v - w_b) / d gamma = slope * d w_b / d gamma: the tilt turns the wind into the body's axes.
+    a.block<1, 2>(0, 2) -= a(0, 0) * wind_jacobian.row(0);
+    a.block<1, 2>(1, 2) -= a(1, 1) * wind_jacobian.row(1);
+    // The ZYX yaw rate, (w_y sin(roll) + w_z cos(roll)) / cos(pitch), written with gamma.
+    turn_heading(dt * (wy * gy + wz * gz) / (gy * gy + gz * gz));
+  }
 
   x_ += x_dot * dt;
   const Matrix6d f = Matrix6d::Identity() + a * dt;
   p_ = f * p_ * f.transpose();
   p_.diagonal() += process_density_ * dt;
+}
+
+void DragVelocityEstimator::turn_heading(double angle) {
+  // The heading is kept as its cosine and sine, which is all the wind's projection needs. One step turns it by
+  // milliradians, where a short series is exact to 1e-16 and costs a fraction of std::cos and std::sin.
+  double c, s;
+  if (std::abs(angle) < 0.05) {
+    const double a2 = angle * angle;
+    c = 1.0 - a2 * (0.5 - a2 * (1.0 / 24.0));
+    s = angle * (1.0 - a2 * (1.0 / 6.0 - a2 * (1.0 / 120.0)));
+  } else {
+    c = std::cos(angle);
+    s = std::sin(angle);
+  }
+  const double new_cos = heading_cos_ * c - heading_sin_ * s;
+  const double new_sin = heading_sin_ * c + heading_cos_ * s;
+  const double unit = 0.5 * (3.0 - (new_cos * new_cos + new_sin * new_sin));  // one Newton step back to norm 1
+  heading_cos_ = new_cos * unit;
+  heading_sin_ = new_sin * unit;
+}
+
+Eigen::Vector2d DragVelocityEstimator::wind_in_body(Eigen::Matrix2d* jacobian) const {
+  const double gx = x_[2], gy = x_[3];
+  const double gz = std::sqrt(std::max(1.0 - gx * gx - gy * gy, kMinGammaZ * kMinGammaZ));
+  const double c_pitch = std::sqrt(gy * gy + gz * gz);  // sin(pitch) = -gamma_x
+  const double inv_c_pitch = 1.0 / c_pitch;
+  // The wind in the yawed frame (x along the heading, y to its right), then through pitch and roll:
+  //   R^T w = Rx(roll)^T Ry(pitch)^T (a, b, 0)  ->  (cos(pitch) a,  cos(roll) b + sin(roll) sin(pitch) a).
+  const double c = heading_cos_, s = heading_sin_;
+  const double a = c * params_.wind.x() + s * params_.wind.y();
+  const double b = -s * params_.wind.x() + c * params_.wind.y();
+  const double wy = (gz * b - gx * gy * a) * inv_c_pitch;
+  if (jacobian) {
+    // With gamma_z = sqrt(1 - gx^2 - gy^2) and cos(pitch) = sqrt(1 - gx^2).
+    const double b_over_gz = b / gz;
+    *jacobian << -gx * a * inv_c_pitch, 0.0, (-gx * b_over_gz - gy * a + wy * gx * inv_c_pitch) * inv_c_pitch,
+        (-gy * b_over_gz - gx * a) * inv_c_pitch;
+  }
+  return {c_pitch * a, wy};
+}
+
+void DragVelocityEstimator::fuse_air_velocity(int axis, double air, double wind, const Eigen::Vector2d& jacobian) {
+  const double predicted = x_[axis] - wind;
+  const double slope = drag_slope(params_.drag_linear[axis], params_.drag_quadratic[axis], predicted);
+  if (!(slope > 0.0)) return;
+  const double r = config_.accel_noise * config_.accel_noise / (slope * slope);
+  Vector6d h = Vector6d::Zero();
+  h[axis] = 1.0;
+  h.segment<2>(2) = -jacobian;
+  const Vector6d ph = p_ * h;
+  const Vector6d gain = ph / (h.dot(ph) + r);
+  x_ += gain * (air - predicted);
+  p_ -= gain * ph.transpose();
+  p_ = (0.5 * (p_ + p_.transpose())).eval();
 }
 
 void DragVelocityEstimator::fuse_velocity(int axis, double v_measured) {

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "estimator/constants.hpp"
 #include "estimator/differentiator.hpp"
@@ -56,6 +57,9 @@ struct DragVelocityCounters {
   std::uint64_t rejected_out_of_range = 0;  // beyond max_specific_force or max_rate
   std::uint64_t rejected_time = 0;          // timestamp not after the previous accepted sample's
   std::uint64_t gaps = 0;                   // restarts after more than max_gap without samples
+  // Accepted samples not estimated because the time_offset aligner had no history |time_offset| back yet: the first
+  // |time_offset| seconds of the flight and after each gap (always 0 without a time offset).
+  std::uint64_t aligning = 0;
 };
 
 class DragVelocityEstimator {
@@ -64,8 +68,10 @@ class DragVelocityEstimator {
   // identification) has nothing to invert: its force is still compensated, its velocity reads NaN.
   DragVelocityEstimator(const FullModelParams& params, const DragVelocityConfig& config);
 
-  // O(1) work and no allocation. Returns the estimate for the sample delay_samples() back once the differentiator
-  // window is full. A rejected sample is counted and leaves the estimator exactly as it was.
+  // O(1) work (amortised, with a time offset) and no allocation. Returns the estimate for the sample delay_samples()
+  // back once the differentiator window is full. A rejected sample is counted and leaves the estimator exactly as
+  // it was. With a time offset, the sample at t is estimated with the gyro of t - time_offset (interpolated) and
+  // keeps its t; samples before the aligner holds |time_offset| of history are counted as `aligning`.
   std::optional<DragVelocityEstimate> update(const ImuSample& sample);
 
   const DragVelocityCounters& counters() const { return counters_; }
@@ -76,8 +82,23 @@ class DragVelocityEstimator {
   using Vector6d = Eigen::Matrix<double, 6, 1>;
   using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
+  struct Stamped {
+    double t = 0.0;
+    Eigen::Vector3d value = Eigen::Vector3d::Zero();
+  };
+
+  // Pairs the accelerometer with the gyro of time_offset earlier: delays the gyro (time_offset > 0) or the
+  // accelerometer (< 0) through a ring. False while the ring does not reach back far enough.
+  bool align(ImuSample& sample);
   void predict(double dt, const Eigen::Vector3d& w_measured);
   void fuse_velocity(int axis, double v_measured);
+  // Turns the heading by `angle` (rad).
+  void turn_heading(double angle);
+  // The wind in body x, y at the state's tilt and heading, and its Jacobian by (gamma_x, gamma_y).
+  Eigen::Vector2d wind_in_body(Eigen::Matrix2d* jacobian) const;
+  // The drag measurement of a windy model: `air` is the inverted drag, h(x) = v - R^T w, with `wind` that axis's
+  // R^T w at the current state and `jacobian` its derivative by (gamma_x, gamma_y).
+  void fuse_air_velocity(int axis, double air, double wind, const Eigen::Vector2d& jacobian);
 
   FullModelParams params_;
   DragVelocityConfig config_;
@@ -88,6 +109,19 @@ class DragVelocityEstimator {
   std::array<ImuSample, CausalDifferentiator::kMaxWindow> history_{};
   int head_ = 0;
   std::optional<double> last_input_t_;
+
+  // The time_offset aligner: the delayed stream's last samples, oldest at ring_sequence_ - ring_size_ (in sample
+  // numbers since the last reset). Allocated once, in the constructor, and only with a time offset.
+  static constexpr std::size_t kAlignerCapacity = 1024;  // 0.25 s at 4 kHz
+  std::vector<Stamped> ring_;
+  std::uint64_t ring_sequence_ = 0;  // samples pushed since the last reset
+  std::uint64_t ring_cursor_ = 0;    // the newest sample at or before the last query time
+  std::size_t ring_size_ = 0;
+
+  // Wind: the heading (yaw) of the body in the identification's world frame, integrated from wind_heading, as its
+  // cosine and sine.
+  bool windy_ = false;
+  double heading_cos_ = 1.0, heading_sin_ = 0.0;
 
   // x = (v_x, v_y, gamma_x, gamma_y, b_x, b_y): body velocity, body x, y of the gravity direction, gyro bias.
   Vector6d x_ = Vector6d::Zero();

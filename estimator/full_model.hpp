@@ -22,6 +22,20 @@ struct FullModelParams {
   Eigen::Vector2d drag_quadratic = Eigen::Vector2d::Zero();  // mu_x, mu_y, 1/m
   Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero();      // b_a, IMU axes, m/s^2
 
+  // The effects beyond the rigid body that the live estimator also undoes (docs/effects.md, "Live"). None enters
+  // predict_specific_force(): identify fits the five blocks above; diagnose fits these as effects.
+  //
+  // The accelerometer reads m = (I + diag(accel_scale) + accel_cross) f + accel_bias, in IMU axes.
+  Eigen::Vector3d accel_scale = Eigen::Vector3d::Zero();  // relative scale error per IMU axis
+  Eigen::Matrix3d accel_cross = Eigen::Matrix3d::Zero();  // (a, b): fraction of axis b's force axis a reads; diag 0
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();    // rad/s, IMU axes: subtracted from every gyro reading
+  double time_offset = 0.0;  // s: the accelerometer's sample at t saw the motion the gyro saw at t - time_offset
+  // A constant wind in the world's horizontal plane, (north, east), m/s: drag acts on the air velocity, the ground
+  // velocity minus the wind. The world's north is the identification's: the estimator starts its heading at
+  // wind_heading, the yaw (rad) the identified flight had at its first sample, and integrates the gyro from there.
+  Eigen::Vector2d wind = Eigen::Vector2d::Zero();
+  double wind_heading = 0.0;
+
   friend bool operator==(const FullModelParams&, const FullModelParams&) = default;
 };
 

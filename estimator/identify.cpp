@@ -237,18 +237,29 @@ ModelKind parse_model(std::string_view text) { return parse(text, kModels, "mode
 Method parse_method(std::string_view text) { return parse(text, kMethods, "method"); }
 VelocitySource parse_velocity(std::string_view text) { return parse(text, kVelocities, "velocity source"); }
 
-TimeWindow parse_window(std::string_view text) {
-  const auto number = [text](std::string_view piece, double& x) {
+TimeWindow parse_window(std::string_view text, std::span<const double> t) {
+  bool needs_span = false;
+  // A number of seconds, or a percentage (0 to 100) of the data's span from its first sample.
+  const auto number = [&](std::string_view piece, double& x) {
+    const bool percent = !piece.empty() && piece.back() == '%';
+    if (percent) piece.remove_suffix(1);
     const auto [end, error] = std::from_chars(piece.data(), piece.data() + piece.size(), x);
-    return error == std::errc() && end == piece.data() + piece.size() && std::isfinite(x);
+    if (error != std::errc() || end != piece.data() + piece.size() || !std::isfinite(x)) return false;
+    if (!percent) return true;
+    if (x < 0.0 || x > 100.0) return false;
+    if (t.empty()) return needs_span = true;
+    x = t.front() + x / 100.0 * (data_end(t) - t.front());
+    return true;
   };
   const std::size_t colon = text.find(':');
   TimeWindow w{0.0, std::numeric_limits<double>::infinity()};
   const bool ok = colon != std::string_view::npos && number(text.substr(0, colon), w.start) &&
-                  (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) && w.start < w.end;
+                  (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) && (needs_span || w.start < w.end);
   if (!ok)
     throw std::invalid_argument("bad window \"" + std::string(text) +
-                                "\": expected T0:T1 (or T0: to the end), seconds, T0 < T1");
+                                "\": expected T0:T1 (or T0: to the end), each in seconds or as a percentage of the "
+                                "data (0:40%, 40%:), T0 < T1");
+  if (needs_span) throw std::invalid_argument("window \"" + std::string(text) + "\": a percentage needs the data");
   return w;
 }
 
@@ -351,8 +362,11 @@ VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelPar
   VelocityEvaluation out;
   out.window = clip(window.value_or(TimeWindow{series.t.front(), data_end(series.t)}), series.t, "evaluation");
 
-  const std::vector<Eigen::Vector3d> truth = reference_body_velocity(series);
   const LeverArmCompensator imu_to_body(params);  // for its mounting rotation
+  // The estimator's velocity is in its body frame, the one the mounting defines (R_bs: IMU -> body); the reference's
+  // body-axis velocity is in the series' axes. Score like with like: the truth turned by R_bs.
+  std::vector<Eigen::Vector3d> truth = reference_body_velocity(series);
+  for (Eigen::Vector3d& v : truth) v = imu_to_body.to_body(v);
   std::vector<Eigen::Vector3d> gyro_body(series.size());
   for (std::size_t k = 0; k < series.size(); ++k) gyro_body[k] = imu_to_body.to_body(series.gyro[k]);
   const std::vector<Eigen::Vector3d> open_loop = dead_reckoned_body_velocity(series.t, gyro_body);

@@ -51,8 +51,10 @@ struct IdentifyOptions {
 
 // ---- windows ----
 
-// "T0:T1" in seconds of session time; "T0:" runs to the end of the data. Throws std::invalid_argument otherwise.
-TimeWindow parse_window(std::string_view text);
+// "T0:T1" in seconds of session time; "T0:" runs to the end of the data. Either end may be a percentage of the
+// data's span instead ("0:40%", "40%:"), which needs the samples' times `t` to resolve. Throws std::invalid_argument
+// otherwise.
+TimeWindow parse_window(std::string_view text, std::span<const double> t = {});
 
 struct Windows {
   TimeWindow train, validate;
@@ -139,8 +141,10 @@ struct VelocityEvaluation {
 };
 
 // Runs DragVelocityEstimator over the whole series (its state needs the flight's start) and scores the samples in
-// `window` (default: all). Throws std::invalid_argument without a reference, for params the estimator refuses, for
-// an axis without drag (no velocity to score) or for an empty window.
+// `window` (default: all). Every row is scored in the estimator's body frame: the reference's velocity, in the
+// series' axes, is turned by the mounting (R_bs = Exp(mounting), IMU -> body) first. Throws std::invalid_argument
+// without a reference, for params the estimator refuses, for an axis without drag (no velocity to score) or for an
+// empty window.
 VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
                                      const std::optional<TimeWindow>& window = std::nullopt,
                                      const DragVelocityConfig& config = {});

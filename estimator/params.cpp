@@ -1,9 +1,11 @@
 #include "estimator/params.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
+#include <string_view>
 
 #include "estimator/constants.hpp"
 
@@ -17,22 +19,136 @@ constexpr double kDegPerRad = 180.0 / kPi;
 // difference means a person edited one and not the other.
 constexpr double kAngleAgreement = 1e-9;  // rad
 
+// diagnose's library (diagnose/effects/library.cpp), in its order. The estimator does not link diagnose; a new
+// effect there must be added here, with how the live estimator runs it (docs/effects.md, "Live").
+constexpr std::array<std::string_view, 12> kEffects = {
+    "linear_drag", "quadratic_drag", "accel_bias", "gyro_bias", "thrust",    "time_offset",
+    "accel_scale", "accel_cross",    "lever_arm_z", "vibration", "wind",      "self_consistent_velocity"};
+constexpr std::string_view kVibrationRefusal =
+    "vibration is a sinusoid whose phase belongs to the identified session's clock; live, vibration is measurement "
+    "noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with --lowpass or "
+    "--ignore-band";
+
+constexpr std::array<std::string_view, 5> kTopKeys = {"version", "paper", "full", "identification", "effects"};
+constexpr std::array<std::string_view, 2> kPaperKeys = {"x", "y"};
+constexpr std::array<std::string_view, 6> kPaperAxisKeys = {"r", "beta", "beta_deg", "alpha", "alpha_deg", "mu"};
+constexpr std::array<std::string_view, 13> kFullKeys = {
+    "lever_arm",   "mounting",  "mounting_deg", "drag_linear", "drag_quadratic", "accel_bias",      "accel_scale",
+    "accel_cross", "gyro_bias", "time_offset",  "wind",        "wind_heading",   "wind_heading_deg"};
+constexpr std::array<std::string_view, 6> kIdentificationKeys = {"method",     "seed", "fit_windows",
+                                                                 "validation_windows", "std_errors", "rmse"};
+
+std::string join(const std::string& path, std::string_view key) {
+  return path.empty() ? std::string(key) : path + "." + std::string(key);
+}
+
+// Levenshtein distance: insertions, deletions and substitutions, one each.
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+// The valid name nearest `name`, when it is near enough to be a typo: a third of its length, at least 2 edits.
+template <std::size_t N>
+std::optional<std::string_view> nearest(std::string_view name, const std::array<std::string_view, N>& valid) {
+  std::optional<std::string_view> best;
+  std::size_t best_distance = 0;
+  for (const std::string_view candidate : valid) {
+    const std::size_t d = edit_distance(name, candidate);
+    if (!best || d < best_distance) {
+      best = candidate;
+      best_distance = d;
+    }
+  }
+  if (best && best_distance <= std::max<std::size_t>(2, best->size() / 3)) return best;
+  return std::nullopt;
+}
+
+template <std::size_t N>
+std::string listing(const std::array<std::string_view, N>& valid) {
+  std::string out;
+  for (const std::string_view v : valid) out += (out.empty() ? "" : ", ") + std::string(v);
+  return out;
+}
+
+[[noreturn]] void wrong_type(const std::string& path, std::string_view expected, const json& got) {
+  throw std::invalid_argument("PARAMS.json: " + path + ": expected " + std::string(expected) + ", got " +
+                              got.type_name());
+}
+
+// Strict reading: a misspelt key would otherwise be a silently ignored parameter, and the default it leaves
+// (no drag, no bias) is a valid model.
+template <std::size_t N>
+void check_object(const json& j, const std::string& path, const std::array<std::string_view, N>& valid) {
+  if (!j.is_object()) wrong_type(path.empty() ? "(top level)" : path, "an object", j);
+  for (const auto& item : j.items()) {
+    if (std::find(valid.begin(), valid.end(), item.key()) != valid.end()) continue;
+    std::string message = "PARAMS.json: unknown key \"" + join(path, item.key()) + "\"";
+    if (const auto guess = nearest(item.key(), valid))
+      message += " (did you mean \"" + join(path, *guess) + "\"?)";
+    else
+      message += " (valid keys" + (path.empty() ? std::string() : " in " + path) + ": " + listing(valid) + ")";
+    throw std::invalid_argument(message);
+  }
+}
+
+// The value, converted by nlohmann, with its type errors named by key path.
+template <typename T>
+T get(const json& j, const std::string& path, std::string_view expected) {
+  try {
+    return j.get<T>();
+  } catch (const json::exception&) {
+    wrong_type(path, expected, j);
+  }
+}
+
+double number(const json& j, const std::string& path) {
+  if (!j.is_number()) wrong_type(path, "a number", j);
+  return j.get<double>();
+}
+
+template <int N>
+Eigen::Matrix<double, N, 1> vector(const json& j, const std::string& path) {
+  const bool ok = j.is_array() && j.size() == N && std::all_of(j.begin(), j.end(), [](const json& v) {
+                    return v.is_number();
+                  });
+  if (!ok) wrong_type(path, "an array of " + std::to_string(N) + " numbers", j);
+  Eigen::Matrix<double, N, 1> out;
+  for (int i = 0; i < N; ++i) out[i] = j[static_cast<std::size_t>(i)].template get<double>();
+  return out;
+}
+
+Eigen::Matrix3d matrix3(const json& j, const std::string& path) {
+  if (!j.is_array() || j.size() != 3) wrong_type(path, "an array of 3 rows of 3 numbers", j);
+  Eigen::Matrix3d out;
+  for (int row = 0; row < 3; ++row) {
+    const json& r = j[static_cast<std::size_t>(row)];
+    if (!r.is_array() || r.size() != 3 || !std::all_of(r.begin(), r.end(), [](const json& v) { return v.is_number(); }))
+      wrong_type(path, "an array of 3 rows of 3 numbers", j);
+    for (int col = 0; col < 3; ++col) out(row, col) = r[static_cast<std::size_t>(col)].get<double>();
+  }
+  return out;
+}
+
 template <int N>
 json to_array(const Eigen::Matrix<double, N, 1>& v) {
   return json(std::vector<double>(v.data(), v.data() + N));
 }
 
-template <int N>
-Eigen::Matrix<double, N, 1> vector_at(const json& j, const char* key, const Eigen::Matrix<double, N, 1>& fallback) {
-  const auto it = j.find(key);
-  if (it == j.end()) return fallback;
-  const auto values = it->get<std::array<double, N>>();
-  return Eigen::Map<const Eigen::Matrix<double, N, 1>>(values.data());
-}
-
-double number_at(const json& j, const char* key, double fallback) {
-  const auto it = j.find(key);
-  return it == j.end() ? fallback : it->get<double>();
+json to_rows(const Eigen::Matrix3d& m) {
+  json out = json::array();
+  for (int row = 0; row < 3; ++row) out.push_back(to_array<3>(m.row(row).transpose()));
+  return out;
 }
 
 double largest_difference(double a, double b) { return std::abs(a - b); }
@@ -40,22 +156,22 @@ double largest_difference(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { 
 
 // An angle (scalar or vector) stored as `key` in radians and `key`_deg in degrees; either may be missing.
 template <typename Angle, typename Read>
-Angle angle_at(const json& j, const std::string& key, const Angle& fallback, Read read) {
+Angle angle_at(const json& j, const std::string& path, const std::string& key, const Angle& fallback, Read read) {
   const std::string deg_key = key + "_deg";
   const bool has_rad = j.contains(key);
   const bool has_deg = j.contains(deg_key);
-  if (!has_deg) return has_rad ? read(key.c_str()) : fallback;
-  const Angle from_deg = read(deg_key.c_str()) / kDegPerRad;
+  if (!has_deg) return has_rad ? read(j.at(key), join(path, key)) : fallback;
+  const Angle from_deg = read(j.at(deg_key), join(path, deg_key)) / kDegPerRad;
   if (!has_rad) return from_deg;
-  const Angle value = read(key.c_str());
+  const Angle value = read(j.at(key), join(path, key));
   if (largest_difference(value, from_deg) > kAngleAgreement)
-    throw std::invalid_argument("PARAMS.json: " + key + " and " + deg_key + " disagree");
+    throw std::invalid_argument("PARAMS.json: " + join(path, key) + " and " + join(path, deg_key) + " disagree");
   return value;
 }
 
 template <typename Params>
-void throw_if_invalid(const Params& p, const char* what) {
-  if (auto error = validate(p)) throw std::invalid_argument(std::string("PARAMS.json ") + what + ": " + *error);
+void throw_if_invalid(const Params& p, const std::string& path) {
+  if (auto error = validate(p)) throw std::invalid_argument("PARAMS.json " + path + ": " + *error);
 }
 
 json windows_to_json(const std::vector<TimeWindow>& windows) {
@@ -64,17 +180,94 @@ json windows_to_json(const std::vector<TimeWindow>& windows) {
   return out;
 }
 
-std::vector<TimeWindow> windows_at(const json& j, const char* key) {
+std::vector<TimeWindow> windows_at(const json& j, const std::string& path) {
   std::vector<TimeWindow> out;
-  if (!j.contains(key)) return out;
-  for (const auto& pair : j.at(key).get<std::vector<std::array<double, 2>>>()) {
-    if (!(pair[0] < pair[1])) throw std::invalid_argument(std::string("PARAMS.json: empty window in ") + key);
-    out.push_back({pair[0], pair[1]});
+  if (!j.is_array()) wrong_type(path, "an array of [start, end] pairs", j);
+  for (const json& pair : j) {
+    const Eigen::Vector2d w = vector<2>(pair, path + "[]");
+    if (!(w[0] < w[1])) throw std::invalid_argument("PARAMS.json: empty window in " + path);
+    out.push_back({w[0], w[1]});
+  }
+  return out;
+}
+
+std::map<std::string, double> numbers_by_name(const json& j, const std::string& path) {
+  if (!j.is_object()) wrong_type(path, "an object of numbers", j);
+  std::map<std::string, double> out;
+  for (const auto& item : j.items()) out[item.key()] = number(item.value(), join(path, item.key()));
+  return out;
+}
+
+PaperAxisParams read_paper_axis(const json& j, const std::string& path) {
+  check_object(j, path, kPaperAxisKeys);
+  const PaperAxisParams d;
+  PaperAxisParams p;
+  p.r = j.contains("r") ? number(j.at("r"), join(path, "r")) : d.r;
+  p.beta = angle_at(j, path, "beta", d.beta, number);
+  p.alpha = angle_at(j, path, "alpha", d.alpha, number);
+  p.mu = j.contains("mu") ? number(j.at("mu"), join(path, "mu")) : d.mu;
+  throw_if_invalid(p, path);
+  return p;
+}
+
+FullModelParams read_full(const json& j, const std::string& path) {
+  check_object(j, path, kFullKeys);
+  FullModelParams p;  // the defaults stand for missing keys
+  const auto at = [&](const char* key, auto& field, auto read) {
+    if (j.contains(key)) field = read(j.at(key), join(path, key));
+  };
+  at("lever_arm", p.lever_arm, vector<3>);
+  p.mounting = angle_at<Eigen::Vector3d>(j, path, "mounting", p.mounting, vector<3>);
+  at("drag_linear", p.drag_linear, vector<2>);
+  at("drag_quadratic", p.drag_quadratic, vector<2>);
+  at("accel_bias", p.accel_bias, vector<3>);
+  at("accel_scale", p.accel_scale, vector<3>);
+  at("accel_cross", p.accel_cross, matrix3);
+  at("gyro_bias", p.gyro_bias, vector<3>);
+  at("time_offset", p.time_offset, number);
+  at("wind", p.wind, vector<2>);
+  p.wind_heading = angle_at(j, path, "wind_heading", p.wind_heading, number);
+  throw_if_invalid(p, path);
+  return p;
+}
+
+Identification read_identification(const json& j, const std::string& path) {
+  check_object(j, path, kIdentificationKeys);
+  Identification id;
+  if (j.contains("method")) id.method = get<std::string>(j.at("method"), join(path, "method"), "a string");
+  if (j.contains("seed")) {
+    const json& seed = j.at("seed");
+    if (!seed.is_number_unsigned()) wrong_type(join(path, "seed"), "an unsigned integer", seed);
+    id.seed = seed.get<std::uint64_t>();
+  }
+  if (j.contains("fit_windows")) id.fit_windows = windows_at(j.at("fit_windows"), join(path, "fit_windows"));
+  if (j.contains("validation_windows"))
+    id.validation_windows = windows_at(j.at("validation_windows"), join(path, "validation_windows"));
+  if (j.contains("std_errors")) id.std_errors = numbers_by_name(j.at("std_errors"), join(path, "std_errors"));
+  if (j.contains("rmse")) id.rmse = numbers_by_name(j.at("rmse"), join(path, "rmse"));
+  return id;
+}
+
+std::vector<std::string> read_effects(const json& j, const std::string& path) {
+  if (!j.is_array()) wrong_type(path, "an array of effect names", j);
+  std::vector<std::string> out;
+  for (const json& name : j) {
+    if (!name.is_string()) wrong_type(path + "[]", "an effect name (a string)", name);
+    out.push_back(name.get<std::string>());
+    if (auto why = live_effect_refusal(out.back())) throw std::invalid_argument("PARAMS.json: " + path + ": " + *why);
   }
   return out;
 }
 
 }  // namespace
+
+std::optional<std::string> live_effect_refusal(std::string_view effect) {
+  if (effect == "vibration") return "refused: " + std::string(kVibrationRefusal);
+  if (std::find(kEffects.begin(), kEffects.end(), effect) != kEffects.end()) return std::nullopt;
+  std::string message = "unknown effect \"" + std::string(effect) + "\"";
+  if (const auto guess = nearest(effect, kEffects)) return message + " (did you mean \"" + std::string(*guess) + "\"?)";
+  return message + " (diagnose's effects: " + listing(kEffects) + ")";
+}
 
 void to_json(json& j, const PaperAxisParams& p) {
   j = json{{"r", p.r},
@@ -85,15 +278,7 @@ void to_json(json& j, const PaperAxisParams& p) {
            {"mu", p.mu}};
 }
 
-void from_json(const json& j, PaperAxisParams& p) {
-  const PaperAxisParams d;
-  const auto scalar = [&j](const char* key) { return j.at(key).get<double>(); };
-  p.r = number_at(j, "r", d.r);
-  p.beta = angle_at(j, "beta", d.beta, scalar);
-  p.alpha = angle_at(j, "alpha", d.alpha, scalar);
-  p.mu = number_at(j, "mu", d.mu);
-  throw_if_invalid(p, "paper");
-}
+void from_json(const json& j, PaperAxisParams& p) { p = read_paper_axis(j, "paper"); }
 
 void to_json(json& j, const FullModelParams& p) {
   j = json{{"lever_arm", to_array(p.lever_arm)},
@@ -101,19 +286,17 @@ void to_json(json& j, const FullModelParams& p) {
            {"mounting_deg", to_array<3>(p.mounting * kDegPerRad)},
            {"drag_linear", to_array(p.drag_linear)},
            {"drag_quadratic", to_array(p.drag_quadratic)},
-           {"accel_bias", to_array(p.accel_bias)}};
+           {"accel_bias", to_array(p.accel_bias)},
+           {"accel_scale", to_array(p.accel_scale)},
+           {"accel_cross", to_rows(p.accel_cross)},
+           {"gyro_bias", to_array(p.gyro_bias)},
+           {"time_offset", p.time_offset},
+           {"wind", to_array(p.wind)},
+           {"wind_heading", p.wind_heading},
+           {"wind_heading_deg", p.wind_heading * kDegPerRad}};
 }
 
-void from_json(const json& j, FullModelParams& p) {
-  const FullModelParams d;
-  const auto vector3 = [&j](const char* key) { return vector_at<3>(j, key, Eigen::Vector3d::Zero()); };
-  p.lever_arm = vector_at<3>(j, "lever_arm", d.lever_arm);
-  p.mounting = angle_at<Eigen::Vector3d>(j, "mounting", d.mounting, vector3);
-  p.drag_linear = vector_at<2>(j, "drag_linear", d.drag_linear);
-  p.drag_quadratic = vector_at<2>(j, "drag_quadratic", d.drag_quadratic);
-  p.accel_bias = vector_at<3>(j, "accel_bias", d.accel_bias);
-  throw_if_invalid(p, "full");
-}
+void from_json(const json& j, FullModelParams& p) { p = read_full(j, "full"); }
 
 void to_json(json& j, const Identification& id) {
   j = json{{"method", id.method},
@@ -124,33 +307,34 @@ void to_json(json& j, const Identification& id) {
            {"rmse", id.rmse}};
 }
 
-void from_json(const json& j, Identification& id) {
-  id = Identification{};
-  if (j.contains("method")) id.method = j.at("method").get<std::string>();
-  if (j.contains("seed")) id.seed = j.at("seed").get<std::uint64_t>();
-  id.fit_windows = windows_at(j, "fit_windows");
-  id.validation_windows = windows_at(j, "validation_windows");
-  if (j.contains("std_errors")) id.std_errors = j.at("std_errors").get<std::map<std::string, double>>();
-  if (j.contains("rmse")) id.rmse = j.at("rmse").get<std::map<std::string, double>>();
-}
+void from_json(const json& j, Identification& id) { id = read_identification(j, "identification"); }
 
 void to_json(json& j, const ModelParams& p) {
   j = json{{"version", kParamsVersion},
            {"paper", {{"x", p.paper_x}, {"y", p.paper_y}}},
            {"full", p.full},
+           {"effects", p.effects},
            {"identification", p.identification}};
 }
 
 void from_json(const json& j, ModelParams& p) {
-  if (j.value("version", kParamsVersion) != kParamsVersion)
-    throw std::invalid_argument("PARAMS.json: unsupported version " + j.at("version").dump());
+  check_object(j, "", kTopKeys);
+  if (j.contains("version")) {
+    const json& version = j.at("version");
+    if (!version.is_number_integer()) wrong_type("version", "an integer", version);
+    if (version.get<std::int64_t>() != kParamsVersion)
+      throw std::invalid_argument("PARAMS.json: unsupported version " + version.dump());
+  }
   p = ModelParams{};
-  const json empty = json::object();
-  const json& paper = j.contains("paper") ? j.at("paper") : empty;
-  p.paper_x = paper.value("x", empty).get<PaperAxisParams>();
-  p.paper_y = paper.value("y", empty).get<PaperAxisParams>();
-  p.full = j.value("full", empty).get<FullModelParams>();
-  p.identification = j.value("identification", empty).get<Identification>();
+  if (j.contains("paper")) {
+    const json& paper = j.at("paper");
+    check_object(paper, "paper", kPaperKeys);
+    if (paper.contains("x")) p.paper_x = read_paper_axis(paper.at("x"), "paper.x");
+    if (paper.contains("y")) p.paper_y = read_paper_axis(paper.at("y"), "paper.y");
+  }
+  if (j.contains("full")) p.full = read_full(j.at("full"), "full");
+  if (j.contains("effects")) p.effects = read_effects(j.at("effects"), "effects");
+  if (j.contains("identification")) p.identification = read_identification(j.at("identification"), "identification");
 }
 
 }  // namespace imubridge::estimator

@@ -1,11 +1,13 @@
 #pragma once
 // PARAMS.json: the model parameters and how they were identified. Values are SI (m, s, rad, 1/s, 1/m, m/s^2); each
-// angle also appears in degrees beside its radians for people (beta_deg, alpha_deg, mounting_deg). The defaults
-// disable compensation until an identification fills them in.
+// angle also appears in degrees beside its radians for people (beta_deg, alpha_deg, mounting_deg,
+// wind_heading_deg). The defaults disable compensation until an identification fills them in.
 #include <cstdint>
 #include <map>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "estimator/full_model.hpp"
@@ -38,14 +40,23 @@ struct ModelParams {
   PaperAxisParams paper_x;  // pitch: the paper's x-axis model
   PaperAxisParams paper_y;  // roll: the same model about x_b (paper_model.hpp has the sign mapping)
   FullModelParams full;
+  // The names of diagnose's effects the model includes, in the order diagnose added them (docs/effects.md). Every
+  // one must be an effect the live estimator runs (live_effect_refusal()).
+  std::vector<std::string> effects;
   Identification identification;
 
   friend bool operator==(const ModelParams&, const ModelParams&) = default;
 };
 
-// Reading fills missing keys with the defaults, takes radians over degrees when only one is given, and throws
-// std::invalid_argument when both are given and disagree, when a value is out of range (validate()) or when the
-// file is of another version. A wrongly typed value throws nlohmann::json::type_error.
+// Why the live drag-velocity estimator cannot run diagnose's effect `effect`, or nullopt when it runs it. An unknown
+// name is refused with the nearest known one ("did you mean"); `vibration` is refused with the reason.
+std::optional<std::string> live_effect_refusal(std::string_view effect);
+
+// Reading is strict. It fills missing keys with the defaults (so files written before a key existed still read)
+// and takes radians or degrees when only one is given. It throws std::invalid_argument, naming the key's path
+// ("full.accel_cross"), for: an unknown key (with "did you mean" the nearest valid one when it is close), a value
+// of the wrong type (with the type expected), radians and degrees that disagree, a value out of range
+// (validate()), an effect the live estimator does not run (live_effect_refusal()) and another version.
 void to_json(nlohmann::json& j, const PaperAxisParams& p);
 void from_json(const nlohmann::json& j, PaperAxisParams& p);
 void to_json(nlohmann::json& j, const FullModelParams& p);

@@ -1,5 +1,9 @@
 #include "pipeline/estimation_stage.hpp"
 
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
 namespace imubridge::pipeline {
 
 EstimationStage::EstimationStage(const estimator::ModelParams& params)
@@ -10,17 +14,117 @@ EstimationStage::EstimationStage(const estimator::ModelParams& params, const est
   estimator::DragVelocityEstimator check(params_.full, config_);  // bad parameters fail here, not mid-flight
 }
 
+EstimationStage::EstimationStage(const estimator::ModelParams& params, StageAxes axes)
+    : EstimationStage(params, estimator::config_for(params), std::move(axes)) {}
+
+EstimationStage::EstimationStage(const estimator::ModelParams& params, const estimator::DragVelocityConfig& config,
+                                 StageAxes axes)
+    : EstimationStage(params, config) {
+  axes_ = std::move(axes);
+}
+
 int EstimationStage::delay_samples() const { return (config_.differentiator_window - 1) / 2; }
 
-std::optional<store::Estimate> EstimationStage::update(const protocol::Sample& sample) {
-  auto it = links_.find(sample.link_id);
-  if (it == links_.end()) {
-    it = links_.emplace(sample.link_id, LinkState{estimator::DragVelocityEstimator(params_.full, config_), {}}).first;
+EstimationStage::LinkState& EstimationStage::link(std::uint32_t id) {
+  auto it = links_.find(id);
+  if (it != links_.end()) return it->second;
+  LinkState state{estimator::DragVelocityEstimator(params_.full, config_), {}};
+  if (axes_) {
+    const auto declared = axes_->links.find(id);
+    state.declared = axes_->declared                  ? axes_->declared(id)
+                     : declared != axes_->links.end() ? declared->second
+                                                      : axes_->others;
+    state.detector.emplace();
+    if (!state.declared.automatic) {
+      state.imu_to_body = state.declared.imu_to_body;
+      state.rotate = !estimator::is_identity(state.declared);
+    }
   }
-  LinkState& link = it->second;
+  return links_.emplace(id, std::move(state)).first->second;
+}
+
+void EstimationStage::resolve(std::uint32_t id, LinkState& link) {
+  const estimator::AxesResolution resolution = estimator::resolve_axes(link.declared, link.detector->result());
+  link.detector.reset();
+  link.imu_to_body = resolution.axes.imu_to_body;
+  link.rotate = !estimator::is_identity(resolution.axes);
+  if (axes_->on_resolved) axes_->on_resolved(id, resolution);
+}
+
+void EstimationStage::update(const protocol::Sample& sample, std::vector<store::Estimate>& out) {
+  LinkState& state = link(sample.link_id);
+  if (state.detector) {
+    const Eigen::Vector3d accel(sample.accel[0], sample.accel[1], sample.accel[2]);
+    const Eigen::Vector3d gyro(sample.gyro[0], sample.gyro[1], sample.gyro[2]);
+    // A corrupt sample says nothing about gravity; the estimator counts it when its turn comes.
+    const bool decided = accel.allFinite() && gyro.allFinite() &&
+                         state.detector->add(static_cast<double>(sample.device_time_us) * 1e-6, accel, gyro);
+    if (state.declared.automatic) {
+      state.waiting.push_back(sample);
+      if (!decided) return;
+      resolve(sample.link_id, state);
+      std::vector<protocol::Sample> waiting = std::move(state.waiting);
+      state.waiting = {};
+      for (const protocol::Sample& s : waiting) {
+        if (auto e = estimate(state, s)) out.push_back(*e);
+      }
+      return;
+    }
+    if (decided) resolve(sample.link_id, state);
+  }
+  if (auto e = estimate(state, sample)) out.push_back(*e);
+}
+
+std::optional<store::Estimate> EstimationStage::update(const protocol::Sample& sample) {
+  std::vector<store::Estimate> out;
+  update(sample, out);
+  if (out.size() > 1) {
+    throw std::logic_error("EstimationStage::update: a link released several estimates; use update(sample, out)");
+  }
+  if (out.empty()) return std::nullopt;
+  return out.front();
+}
+
+void EstimationStage::finish(std::vector<store::Estimate>& out) {
+  for (auto& [id, state] : links_) {
+    if (!state.detector) continue;
+    if (!state.detector->decided()) {
+      // Decide on the mean specific force of what came: the detector's own flight rule, applied early.
+      std::optional<estimator::AxesDetection> detection;
+      std::vector<double> t;
+      std::vector<Eigen::Vector3d> accel, gyro;
+      for (const protocol::Sample& s : state.waiting) {
+        const Eigen::Vector3d a(s.accel[0], s.accel[1], s.accel[2]), w(s.gyro[0], s.gyro[1], s.gyro[2]);
+        if (!a.allFinite() || !w.allFinite() || (!t.empty() && s.device_time_us * 1e-6 <= t.back())) continue;
+        t.push_back(static_cast<double>(s.device_time_us) * 1e-6);
+        accel.push_back(a);
+        gyro.push_back(w);
+      }
+      detection = estimator::detect_up(t, accel, gyro);
+      const estimator::AxesResolution resolution = estimator::resolve_axes(state.declared, detection);
+      state.detector.reset();
+      state.imu_to_body = resolution.axes.imu_to_body;
+      state.rotate = !estimator::is_identity(resolution.axes);
+      if (axes_->on_resolved) axes_->on_resolved(id, resolution);
+    } else {
+      resolve(id, state);
+    }
+    std::vector<protocol::Sample> waiting = std::move(state.waiting);
+    state.waiting = {};
+    for (const protocol::Sample& s : waiting) {
+      if (auto e = estimate(state, s)) out.push_back(*e);
+    }
+  }
+}
+
+std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const protocol::Sample& sample) {
   const double t = static_cast<double>(sample.device_time_us) * 1e-6;
-  const estimator::ImuSample input{t, {sample.gyro[0], sample.gyro[1], sample.gyro[2]},
-                                   {sample.accel[0], sample.accel[1], sample.accel[2]}};
+  estimator::ImuSample input{t, {sample.gyro[0], sample.gyro[1], sample.gyro[2]},
+                             {sample.accel[0], sample.accel[1], sample.accel[2]}};
+  if (link.rotate) {
+    input.gyro = link.imu_to_body * input.gyro;
+    input.accel = link.imu_to_body * input.accel;
+  }
   const auto rejected = [&link] {
     const auto& c = link.estimator.counters();
     return c.rejected_non_finite + c.rejected_out_of_range + c.rejected_time;

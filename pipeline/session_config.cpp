@@ -50,7 +50,8 @@ void add_recorded_links(json& config, const std::vector<RecordedLink>& links) {
   for (const auto& link : links) {
     out.push_back({{"name", link.name},
                    {"protocol", protocol::wire_format_name(link.format)},
-                   {"calibration", calibration_to_json(link.calibration)}});
+                   {"calibration", calibration_to_json(link.calibration)},
+                   {"imu_axes", link.imu_axes}});
   }
 }
 
@@ -64,7 +65,8 @@ std::vector<RecordedLink> recorded_links(const std::string& session_config_json)
     try {
       links.push_back({j.at("name").get<std::string>(),
                        protocol::parse_wire_format(j.at("protocol").get<std::string>()),
-                       calibration_from_json(j.at("calibration"))});
+                       calibration_from_json(j.at("calibration")),
+                       j.value("imu_axes", std::string("auto"))});
     } catch (const json::exception& e) {
       throw std::invalid_argument(std::string("session config, links: ") + e.what());
     }

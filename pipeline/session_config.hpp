@@ -16,13 +16,16 @@ struct RecordedLink {
   std::string name;  // the store link's name
   protocol::WireFormat format = protocol::WireFormat::imubridge;
   protocol::Calibration calibration = protocol::Calibration::reference_board();
+  // How the IMU's axes sit in the body (estimator::parse_imu_axes spelling). Sessions recorded before it was kept
+  // read back as "auto": detect from gravity.
+  std::string imu_axes = "auto";
 };
 
 nlohmann::json calibration_to_json(const protocol::Calibration& c);
 // Throws std::invalid_argument naming the bad field.
 protocol::Calibration calibration_from_json(const nlohmann::json& j);
 
-// {"links": [{"name": .., "protocol": .., "calibration": {..}}, ...]} merged into `config`.
+// {"links": [{"name": .., "protocol": .., "calibration": {..}, "imu_axes": ..}, ...]} merged into `config`.
 void add_recorded_links(nlohmann::json& config, const std::vector<RecordedLink>& links);
 // Throws std::invalid_argument when the snapshot has no usable "links".
 std::vector<RecordedLink> recorded_links(const std::string& session_config_json);

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "estimator/differentiator.hpp"
+#include "pipeline/session_config.hpp"
 
 namespace imubridge::pipeline {
 namespace {
@@ -68,6 +69,47 @@ Reference read_reference(const store::Store& store, std::int64_t session, Sessio
   return r;
 }
 
+// What the link's recorded config declares; "auto" when the session predates the key or records no links.
+std::string declared_axes(const store::Store& store, std::int64_t session, std::int64_t link_id) {
+  std::string config;
+  for (const store::Session& s : store.sessions()) {
+    if (s.id == session) config = s.info.config;
+  }
+  std::string name;
+  for (const store::Link& l : store.links(session)) {
+    if (l.id == link_id) name = l.name;
+  }
+  try {
+    for (const RecordedLink& l : recorded_links(config)) {
+      if (l.name == name) return l.imu_axes;
+    }
+  } catch (const std::invalid_argument&) {
+    // A snapshot without links (TOML, or older writers): nothing declared.
+  }
+  return "auto";
+}
+
+// Resolves the axes on the samples as read (IMU axes), then rotates them and the reference into body axes.
+void to_body_axes(SessionSeries& out, const std::string& declared) {
+  const estimator::ImuAxes axes = estimator::parse_imu_axes(declared);
+  out.axes = estimator::resolve_axes(axes, estimator::detect_up(out.series));
+  if (out.axes.mismatch) out.warnings.push_back(*out.axes.mismatch);
+  if (out.axes.note) out.warnings.push_back(*out.axes.note);
+  const Eigen::Matrix3d& r_bs = out.axes.axes.imu_to_body;
+  Eigen::Matrix3d ref_from_imu = Eigen::Matrix3d::Identity();
+  if (out.series.reference) {
+    out.reference_alignment = estimator::align_reference_frame(out.series, r_bs);
+    ref_from_imu = out.reference_alignment->ref_from_imu;
+    const auto frame = out.reference_alignment->frame;
+    // Nothing to say when both hypotheses are the same frame (an FRD IMU) and the data agree.
+    const bool ambiguous = frame == estimator::ReferenceFrame::assumed_imu && r_bs != Eigen::Matrix3d::Identity();
+    if (ambiguous || frame == estimator::ReferenceFrame::estimated)
+      out.warnings.push_back(estimator::describe(*out.reference_alignment) +
+                             (ambiguous ? ": taken as the IMU's" : ": neither the IMU's nor the body's"));
+  }
+  estimator::rotate_to_body(out.series, r_bs, ref_from_imu);
+}
+
 }  // namespace
 
 SessionSeries read_session_series(const store::Store& store, std::int64_t session,
@@ -78,6 +120,8 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   SessionSeries out;
   out.link_id = choose_link(store, session, options.link);
 
+  const std::string declared = options.imu_axes ? *options.imu_axes : declared_axes(store, session, out.link_id);
+  estimator::parse_imu_axes(declared);  // a bad spelling fails before the work
   estimator::ImuSeries& series = out.series;
   std::vector<std::int64_t> recv_mono_ns;
   std::optional<std::int64_t> first_us, last_us;
@@ -100,10 +144,16 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
     recv_mono_ns.push_back(s.recv_mono_ns);
   });
   if (series.size() == 0) throw std::invalid_argument(session_name(session) + " has no usable samples");
-  if (options.reference == ReferenceUse::none) return out;
+  if (options.reference == ReferenceUse::none) {
+    to_body_axes(out, declared);
+    return out;
+  }
 
   const Reference reference = read_reference(store, session, out.counts);
-  if (options.reference == ReferenceUse::when_present && out.counts.reference_rows < 2) return out;
+  if (options.reference == ReferenceUse::when_present && out.counts.reference_rows < 2) {
+    to_body_axes(out, declared);
+    return out;
+  }
   if (reference.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
   estimator::ImuSeries kept;
   kept.reference.emplace();
@@ -128,6 +178,7 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   if (kept.size() == 0)
     throw std::invalid_argument(session_name(session) + ": no sample was received while the reference was recorded");
   series = std::move(kept);
+  to_body_axes(out, declared);
   return out;
 }
 

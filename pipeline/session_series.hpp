@@ -4,7 +4,10 @@
 // (docs/identification.md, "Session time").
 #include <cstdint>
 #include <optional>
+#include <string>
+#include <vector>
 
+#include "estimator/imu_axes.hpp"
 #include "estimator/imu_series.hpp"
 #include "store/store.hpp"
 
@@ -20,6 +23,9 @@ enum class ReferenceUse {
 struct SessionSeriesOptions {
   std::optional<std::int64_t> link{};  // default: the session's link with the most samples
   ReferenceUse reference = ReferenceUse::none;
+  // The IMU's axes (estimator::parse_imu_axes spelling), overriding what the link's recorded config declares
+  // ("auto" when it declares nothing).
+  std::optional<std::string> imu_axes{};
 };
 
 // What was read and what was left out, and why. Nothing is dropped silently.
@@ -33,9 +39,12 @@ struct SessionSeriesCounts {
 };
 
 struct SessionSeries {
-  estimator::ImuSeries series;  // t: seconds since the link's first sample, from device_time_us
+  estimator::ImuSeries series;  // t: seconds since the link's first sample, from device_time_us; FRD body axes
   std::int64_t link_id = 0;
   SessionSeriesCounts counts;
+  estimator::AxesResolution axes;                                  // how the IMU's axes were turned into the body's
+  std::optional<estimator::ReferenceAlignment> reference_alignment;  // with a reference: its attitude's frame
+  std::vector<std::string> warnings;  // one line each, without a "warning: " prefix: axes mismatch, notes
 };
 
 // Reads `session` from `store`. The series' t is the IMU's device_time_us, in seconds from the link's first kept
@@ -43,7 +52,12 @@ struct SessionSeries {
 // takes the reference interpolated at its recv_mono_ns: velocity linearly, attitude by slerp. Poses without a
 // velocity get one from the central difference of the positions. Throws std::invalid_argument for an unknown
 // session or link, a link without samples, or a reference required and missing (fewer than two usable poses), or
-// present in the store (two poses or more) and unusable.
+// present in the store (two poses or more) and unusable, or IMU axes that do not parse.
+//
+// The series comes out in the vehicle's FRD body axes (docs/estimator.md, "IMU axes"): the declared axes (options,
+// else the link's recorded config, else auto) are resolved against gravity detected in the samples, accel and gyro
+// are rotated by R_bs, and a reference attitude is re-expressed body -> NED after estimating whether it was the
+// IMU's or the body's. An FRD session with an FRD (or body) reference comes out bit for bit as read.
 SessionSeries read_session_series(const store::Store& store, std::int64_t session,
                                   const SessionSeriesOptions& options = {});
 

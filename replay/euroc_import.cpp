@@ -128,6 +128,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   if (!calibration.valid() || options.accel_lsb <= 0 || options.gyro_lsb <= 0) {
     throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
   }
+  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
   EurocImportResult result;
   result.imu.path = options.dir / "mav0" / "imu0" / "data.csv";
   std::ifstream imu = open_input(result.imu.path);
@@ -150,7 +151,9 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                              {"velocity_derived", result.velocity_derived},
                              {"accel_lsb", options.accel_lsb},
                              {"gyro_lsb", options.gyro_lsb}}}};
-  pipeline::add_recorded_links(config, {{"imu0", protocol::WireFormat::imubridge, calibration}});
+  pipeline::add_recorded_links(config, {{"imu0", protocol::WireFormat::imubridge, calibration, options.imu_axes}});
+  std::vector<double> axes_t;  // the rows as read, for the gravity check
+  std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
   // The session begins with the first usable row, so a file without one leaves nothing behind. The dataset's
   // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row.
   std::optional<pipeline::LinkRecorder> recorder;
@@ -184,6 +187,9 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         recorder->on_chunk(bytes, row.t_ns, row.t_ns, samples);
         ++result.imu.rows;
         last_t = row.t_ns;
+        axes_t.push_back(static_cast<double>(row.t_ns - t0) * 1e-9);
+        axes_accel.emplace_back(accel[0], accel[1], accel[2]);
+        axes_gyro.emplace_back(gyro[0], gyro[1], gyro[2]);
         store.commit_if_due(std::chrono::steady_clock::now());
         return std::nullopt;
       },
@@ -197,6 +203,14 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   if (result.reference) {
     record_lines(store, result.session, std::nullopt, last_t, "import_skipped", result.reference->path,
                  result.reference->skipped);
+  }
+  result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(axes_t, axes_accel, axes_gyro));
+  if (result.axes.mismatch) {
+    store.append_event(result.session, {.link_id = link,
+                                        .mono_ns = last_t,
+                                        .wall_ns = last_t,
+                                        .kind = "imu_axes_mismatch",
+                                        .detail = *result.axes.mismatch});
   }
   store.end_session(result.session, last_t);
   store.commit();

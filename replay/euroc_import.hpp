@@ -8,6 +8,7 @@
 #include <optional>
 #include <string_view>
 
+#include "estimator/imu_axes.hpp"
 #include "protocol/calibration.hpp"
 #include "replay/text_table.hpp"
 #include "store/store.hpp"
@@ -33,6 +34,9 @@ struct EurocImportOptions {
   // and 4 rad/s. Values beyond are clipped and reported.
   double accel_lsb = 2e-3;  // m/s^2 per count
   double gyro_lsb = 2e-4;   // rad/s per count
+  // How the IMU's axes sit in the body (estimator::parse_imu_axes), recorded in the link's config. EuRoC's ADIS16448
+  // is mounted x up: "x-up"; "auto" detects it from gravity whenever the session is read.
+  std::string imu_axes = "auto";
 };
 
 struct ImportedFile {
@@ -47,14 +51,16 @@ struct EurocImportResult {
   std::optional<ImportedFile> reference;
   bool velocity_derived = false;  // the reference had positions only: velocity_from_positions() supplied it
   LinesByReason clipped;          // IMU rows imported with a value clipped to the frame's range
+  estimator::AxesResolution axes;  // the declared axes checked against gravity in the imported rows
 };
 
 // The calibration imported frames are encoded with: the resolutions, no offsets, IMU axes as in the file. EuRoC has
 // no magnetometer or temperature: their counts are 0 (they decode as 0 uT, 0 C).
 protocol::Calibration import_calibration(double accel_lsb, double gyro_lsb);
 
-// Skipped rows and clipped values are also recorded as events of kind "import_skipped" and "import_clipped". Throws
-// std::invalid_argument, before writing anything, when a file is missing or has no usable row.
+// Skipped rows and clipped values are also recorded as events of kind "import_skipped" and "import_clipped", and
+// declared axes that gravity contradicts as one of kind "imu_axes_mismatch". Throws std::invalid_argument, before
+// writing anything, when a file is missing or has no usable row, or the IMU axes do not parse.
 EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& options);
 
 }  // namespace imubridge::replay

@@ -53,6 +53,21 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
   return decoders;
 }
 
+// Each store link's IMU axes as the session recorded them: a radio link ("<link>/<SOURCE64>") has its port link's.
+pipeline::StageAxes recorded_axes(const store::Store& store, const store::Session& session) {
+  pipeline::StageAxes axes;
+  const auto recorded = pipeline::recorded_links(session.info.config);
+  for (const auto& link : store.links(session.id)) {
+    for (const auto& r : recorded) {
+      if (link.name == r.name || link.name.starts_with(r.name + "/")) {
+        axes.links[static_cast<std::uint32_t>(link.id)] = estimator::parse_imu_axes(r.imu_axes);
+        break;
+      }
+    }
+  }
+  return axes;
+}
+
 }  // namespace
 
 estimator::ModelParams parse_params(std::string_view json_text, const std::string& origin) {
@@ -74,7 +89,9 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
   const store::Session session = find_session(store, session_id);
   const estimator::ModelParams params = options.params ? *options.params : replay_params(store, session_id);
   auto decoders = make_decoders(store, session);
-  pipeline::EstimationStage stage(params);
+  // The links' axes as recorded, so a replay rotates (and, for auto links, decides) exactly as the live run did.
+  pipeline::EstimationStage stage(params, recorded_axes(store, session));
+  std::vector<store::Estimate> estimates;
 
   ReplayResult result;
   std::vector<protocol::Sample> samples;
@@ -85,12 +102,12 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
         continue;
       }
       ++result.samples;
-      if (const auto e = stage.update(sample)) {
-        store.append_estimate(result.run, *e);
-        ++result.estimates;
-      }
+      stage.update(sample, estimates);
     }
     samples.clear();
+    for (const store::Estimate& e : estimates) store.append_estimate(result.run, e);
+    result.estimates += estimates.size();
+    estimates.clear();
   };
   play_chunks(store, session, options.play, [&](const store::Chunk& chunk, double t_s) {
     const auto it = decoders.find(chunk.link_id);
@@ -125,6 +142,9 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
     estimate();
     for (const auto& [layer, counters] : link.decoder.counters()) result.counters[link.name] += counters;
   }
+  stage.finish(estimates);  // links still deciding their axes release their samples, as a live run's close does
+  for (const store::Estimate& e : estimates) store.append_estimate(result.run, e);
+  result.estimates += estimates.size();
   store.commit();
   return result;
 }

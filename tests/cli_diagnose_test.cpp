@@ -44,7 +44,9 @@ TEST_F(DiagnoseCommand, WritesTheReport) {
   const CommandResult r =
       diagnose("--session 1 --train 0:20 --validate 20:30 --max-steps 1 --report " + report.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.err.find("step 1: + time_offset"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("step 1: + time_offset"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("velocity RMSE"), std::string::npos) << r.out;  // the user's units, beside m/s^2
+  EXPECT_EQ(r.err.find("covariance_impl"), std::string::npos) << r.err;  // no raw Ceres log lines
   ASSERT_TRUE(fs::exists(report / "report.html"));
   const json j = json::parse(slurp(report / "report.json"));
   EXPECT_EQ(j["velocity_source"], "reference");  // the simulated session has one
@@ -61,6 +63,26 @@ TEST_F(DiagnoseCommand, WritesTheReport) {
   EXPECT_TRUE(j["residual_white"].is_boolean());
   ASSERT_TRUE(j["unexplained"].is_array());
   for (const json& u : j["unexplained"]) EXPECT_TRUE(u.contains("kind")) << u.dump();
+}
+
+TEST_F(DiagnoseCommand, ACandidateBeyondThePlausibilityTableIsRefusedWithItsReason) {
+  // The flight's 10-ms offset is found when allowed (WritesTheReport); with a 1-ms limit it is implausible.
+  const fs::path report = dir_ / "limited";
+  const CommandResult r = diagnose("--session 1 --train 0:20 --validate 20:30 --max-steps 1 --limit time_offset=0.001 "
+                                   "--report " + report.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json j = json::parse(slurp(report / "report.json"));
+  const json& candidates = j["steps"].empty() ? j["last_candidates"] : j["steps"][0]["candidates"];
+  bool refused = false;
+  for (const json& c : candidates) {
+    if (c["effect"] != "time_offset") continue;
+    const std::string why = c["skipped"];
+    refused = why.rfind("implausible", 0) == 0 && why.find("--limit time_offset") != std::string::npos;
+    EXPECT_TRUE(refused) << why;
+  }
+  EXPECT_TRUE(refused);
+  for (const json& step : j["steps"]) EXPECT_NE(step["effect"], "time_offset");
+  EXPECT_EQ(diagnose("--session 1 --limit wingspan=2 --report " + report.string()).exit_code, 2);
 }
 
 TEST_F(DiagnoseCommand, ImuAloneWhenAsked) {

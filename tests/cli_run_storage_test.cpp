@@ -20,7 +20,8 @@ class RunStorageTest : public ::testing::Test {
   void start(const std::string& store_settings, const SpawnOptions& options = {}) {
     std::ofstream(dir_ / "imubridge.toml")
         << "[store]\npath = \"" << db_.string() << "\"\n"
-        << store_settings << "\n[[link]]\nname = \"imu\"\ndevice = \"" << tty_.string() << "\"\n";
+        // The axes declared, so estimates follow from the first samples (an auto link waits to detect them).
+        << store_settings << "\n[[link]]\nname = \"imu\"\ndevice = \"" << tty_.string() << "\"\naxes = \"frd\"\n";
     daemon_ = std::make_unique<Process>(std::vector<std::string>{"run", "--config", (dir_ / "imubridge.toml").string()},
                                         dir_ / "stderr", options);
     ASSERT_TRUE(daemon_->wait_for_log("link 'imu': reading")) << daemon_->log();

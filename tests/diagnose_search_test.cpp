@@ -53,6 +53,11 @@ Diagnosis diagnose(const Case& run) {
   o.ignore_bands = run.ignore_bands;
   o.axes = run.axes;
   o.lowpass_hz = run.lowpass_hz;
+  // These flights exaggerate the sensor errors (15 % of scale or coupling) so that each stands clear of the noise
+  // in a 50-s flight; the plausibility table would refuse them as no real sensor's (plausibility_test,
+  // DiagnoseCommand.ACandidateBeyondThePlausibilityTableIsRefusedWithItsReason test the table itself).
+  o.limits.accel_scale = 0.5;
+  o.limits.accel_cross = 0.5;
   return run_diagnosis(flight(run.sim_effects, run.scenario, run.seed), o);
 }
 
@@ -325,6 +330,30 @@ TEST_P(FoundFirst, NonlinearityIsReportedUnexplained) {
   EXPECT_GT(d.final.rmse_validation, 2.0 * 0.054);  // far above the clean flight's noise floor
   const Diagnosis clean = diagnose({.sim_effects = {}, .velocity = GetParam(), .axes = {0}});
   EXPECT_FALSE(strong_correlation_on_x(clean));
+}
+
+}  // namespace
+}  // namespace imubridge::diagnose
+
+namespace imubridge::diagnose {
+namespace {
+
+TEST(AtBounds, AParameterOnOrWithinOnePercentOfABoundIsFlagged) {
+  const std::vector<Parameter> params{{"k.x", "1/s", 0.0, 0.0, 100.0},      // two-sided: 1 % of the range is 1
+                                      {"scale.x", "", 0.0, -0.5, 0.5},     // 1 % is 0.01
+                                      {"r", "m", 0.0, 0.0},                // one-sided at 0: only 0 itself
+                                      {"free", "m"}};                      // unbounded: never
+  const std::vector<std::string> owners{"linear_drag", "accel_scale", "base", "base"};
+  const auto flagged = [&](std::vector<double> values) { return parameters_at_bounds(params, values, owners); };
+  EXPECT_TRUE(flagged({50.0, 0.0, 0.1, 1e6}).empty());
+  const auto lines = flagged({0.5, -0.495, 0.0, -1e9});
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_NE(lines[0].find("linear_drag k.x"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[0].find("lower bound 0"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("accel_scale scale.x"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("base r"), std::string::npos) << lines[2];
+  EXPECT_EQ(flagged({98.0, 0.48, 1e-3, 0.0}).size(), 0u);  // just outside 1 %
+  EXPECT_EQ(flagged({99.5, 0.5, 0.0, 0.0}).size(), 3u);      // upper bounds too
 }
 
 }  // namespace

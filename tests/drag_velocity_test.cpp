@@ -3,12 +3,15 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <vector>
 
 #include "estimator/constants.hpp"
 #include "estimator/drag_law.hpp"
+#include "estimator/identify.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -51,33 +54,38 @@ TEST(DragLaw, OpposesMotionMonotonicallyWithTheDocumentedSlope) {
 // ---- A synthetic flight with known velocity ----
 
 // ZYX Euler angles as smooth functions of time; the quadrotor holds its altitude, so its velocity is horizontal.
+// `wobble` adds a 3-Hz roll and pitch swing of that amplitude (rad): an agile flight's angular acceleration.
 struct Angles {
   double roll, pitch, yaw;
 };
-Angles angles(double t) {
-  return {0.12 * sin(0.37 * t + 1.0) + 0.04 * sin(2.3 * t), 0.15 * sin(0.5 * t) + 0.05 * sin(1.9 * t),
-          0.3 * t + 0.2 * sin(0.8 * t)};
+constexpr double kWobbleRate = 2.0 * kPi * 3.0;  // rad/s
+Angles angles(double t, double wobble = 0.0) {
+  return {0.12 * sin(0.37 * t + 1.0) + 0.04 * sin(2.3 * t) + wobble * sin(kWobbleRate * t),
+          0.15 * sin(0.5 * t) + 0.05 * sin(1.9 * t) + wobble * cos(kWobbleRate * t), 0.3 * t + 0.2 * sin(0.8 * t)};
 }
-Angles angle_rates(double t) {
-  return {0.12 * 0.37 * cos(0.37 * t + 1.0) + 0.04 * 2.3 * cos(2.3 * t),
-          0.15 * 0.5 * cos(0.5 * t) + 0.05 * 1.9 * cos(1.9 * t), 0.3 + 0.2 * 0.8 * cos(0.8 * t)};
+Angles angle_rates(double t, double wobble = 0.0) {
+  return {0.12 * 0.37 * cos(0.37 * t + 1.0) + 0.04 * 2.3 * cos(2.3 * t) + wobble * kWobbleRate * cos(kWobbleRate * t),
+          0.15 * 0.5 * cos(0.5 * t) + 0.05 * 1.9 * cos(1.9 * t) - wobble * kWobbleRate * sin(kWobbleRate * t),
+          0.3 + 0.2 * 0.8 * cos(0.8 * t)};
 }
-Eigen::Matrix3d attitude(double t) {
-  const Angles a = angles(t);
+Eigen::Matrix3d attitude(double t, double wobble = 0.0) {
+  const Angles a = angles(t, wobble);
   return (Eigen::AngleAxisd(a.yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(a.pitch, Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(a.roll, Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
 }
 // Body rates from the Euler-angle rates (the standard ZYX kinematics).
-Eigen::Vector3d body_rate(double t) {
-  const Angles a = angles(t);
-  const Angles d = angle_rates(t);
+Eigen::Vector3d body_rate(double t, double wobble = 0.0) {
+  const Angles a = angles(t, wobble);
+  const Angles d = angle_rates(t, wobble);
   return {d.roll - d.yaw * sin(a.pitch), d.pitch * cos(a.roll) + d.yaw * sin(a.roll) * cos(a.pitch),
           -d.pitch * sin(a.roll) + d.yaw * cos(a.roll) * cos(a.pitch)};
 }
-Eigen::Vector3d body_rate_dot(double t) {
+Eigen::Vector3d body_rate_dot(double t, double wobble = 0.0) {
   const double e = 1e-4;
-  return (body_rate(t - 2 * e) - 8 * body_rate(t - e) + 8 * body_rate(t + e) - body_rate(t + 2 * e)) / (12 * e);
+  return (body_rate(t - 2 * e, wobble) - 8 * body_rate(t - e, wobble) + 8 * body_rate(t + e, wobble) -
+          body_rate(t + 2 * e, wobble)) /
+         (12 * e);
 }
 
 FullModelParams flight_params() {
@@ -93,6 +101,7 @@ FullModelParams flight_params() {
 struct Flight {
   std::vector<ImuSample> samples;
   std::vector<Eigen::Vector2d> body_velocity;  // truth, per sample
+  std::vector<Eigen::Vector3d> velocity_ned;   // truth, per sample
   Eigen::Vector2d gyro_bias_body;              // truth, body x, y
 };
 
@@ -100,22 +109,35 @@ constexpr double kH = 0.005;        // 200 Hz
 constexpr double kAccelStd = 0.1;   // m/s^2 per sample
 constexpr double kGyroStd = 0.005;  // rad/s per sample
 
-Flight fly(double duration, unsigned seed) {
-  const FullModelParams p = flight_params();
-  const Eigen::Matrix3d imu_to_body = Eigen::AngleAxisd(p.mounting.norm(), p.mounting.normalized()).toRotationMatrix();
-  const Eigen::Vector3d gyro_bias_imu(0.01, -0.008, 0.0);
+// What a flight adds to flight_params()'s sensor and air: the effects beyond the rigid body (the truth's
+// accel_scale, accel_cross, gyro_bias, time_offset and wind) and the swing that makes a time offset matter.
+struct FlightOptions {
+  FullModelParams params = flight_params();
+  double wobble = 0.0;
+};
 
-  // Mass-centre specific force: drag from the body velocity, and the thrust that holds the altitude.
-  const auto specific_force = [&p](double t, const Eigen::Vector3d& v_ned) {
-    const Eigen::Matrix3d r = attitude(t);
-    const Eigen::Vector3d v = r.transpose() * v_ned;
+Flight fly(double duration, unsigned seed, const FlightOptions& options = {}) {
+  const FullModelParams& p = options.params;
+  const double wobble = options.wobble;
+  const Eigen::Matrix3d imu_to_body = Eigen::AngleAxisd(p.mounting.norm(), p.mounting.normalized()).toRotationMatrix();
+  // The gyro bias the filter's own states track, plus the truth's (the gyro_bias effect).
+  const Eigen::Vector3d gyro_bias_imu = Eigen::Vector3d(0.01, -0.008, 0.0) + p.gyro_bias;
+  const Eigen::Vector3d wind(p.wind.x(), p.wind.y(), 0.0);  // the flight starts at yaw 0: wind_heading 0
+  const Eigen::Matrix3d sensor = Eigen::Matrix3d::Identity() + Eigen::Matrix3d(p.accel_scale.asDiagonal()) + p.accel_cross;
+  const auto lag = static_cast<int>(std::lround(p.time_offset / kH));  // the accelerometer's delay, in samples
+  EXPECT_NEAR(lag * kH, p.time_offset, 1e-12);
+
+  // Mass-centre specific force: drag from the body air velocity, and the thrust that holds the altitude.
+  const auto specific_force = [&](double t, const Eigen::Vector3d& v_ned) {
+    const Eigen::Matrix3d r = attitude(t, wobble);
+    const Eigen::Vector3d v = r.transpose() * (v_ned - wind);
     const double dx = drag_specific_force(p.drag_linear.x(), p.drag_quadratic.x(), v.x());
     const double dy = drag_specific_force(p.drag_linear.y(), p.drag_quadratic.y(), v.y());
     const double thrust = (kGravity + r(2, 0) * dx + r(2, 1) * dy) / r(2, 2);
     return Eigen::Vector3d(dx, dy, -thrust);
   };
   const auto accel_ned = [&](double t, const Eigen::Vector3d& v_ned) -> Eigen::Vector3d {
-    return attitude(t) * specific_force(t, v_ned) + Eigen::Vector3d(0, 0, kGravity);
+    return attitude(t, wobble) * specific_force(t, v_ned) + Eigen::Vector3d(0, 0, kGravity);
   };
 
   std::mt19937 rng(seed);
@@ -126,6 +148,8 @@ Flight fly(double duration, unsigned seed) {
 
   Flight flight;
   flight.gyro_bias_body = (imu_to_body * gyro_bias_imu).head<2>();
+  std::vector<Eigen::Vector3d> accel_clean;  // the noiseless readings of each instant
+  std::vector<Eigen::Vector3d> gyro_clean;
   Eigen::Vector3d v_ned = Eigen::Vector3d::Zero();
   for (int k = 0; k * kH < duration; ++k) {
     const double t = k * kH;
@@ -137,15 +161,25 @@ Flight fly(double duration, unsigned seed) {
       const Eigen::Vector3d a4 = accel_ned(t, v_ned + kH * a3);
       v_ned += kH / 6 * (a1 + 2 * a2 + 2 * a3 + a4);
     }
-    const Eigen::Vector3d v_body = attitude(t).transpose() * v_ned;
+    const Eigen::Matrix3d r = attitude(t, wobble);
+    const Eigen::Vector3d v_body = r.transpose() * v_ned;
     const Eigen::Vector3d f_cm = specific_force(t, v_ned);
-    const FullModelInput in{.gyro = imu_to_body.transpose() * body_rate(t),
-                            .gyro_rate = imu_to_body.transpose() * body_rate_dot(t),
-                            .velocity = v_body.head<2>(),
+    const FullModelInput in{.gyro = imu_to_body.transpose() * body_rate(t, wobble),
+                            .gyro_rate = imu_to_body.transpose() * body_rate_dot(t, wobble),
+                            .velocity = (r.transpose() * (v_ned - wind)).head<2>(),
                             .thrust = -f_cm.z()};
-    flight.samples.push_back(
-        {t, in.gyro + gyro_bias_imu + noise(kGyroStd), predict_specific_force(p, in) + noise(kAccelStd)});
+    // m = S f + b_a: predict_specific_force adds the bias to the rigid body's reading.
+    accel_clean.push_back(sensor * (predict_specific_force(p, in) - p.accel_bias) + p.accel_bias);
+    gyro_clean.push_back(in.gyro + gyro_bias_imu);
     flight.body_velocity.push_back(v_body.head<2>());
+    flight.velocity_ned.push_back(v_ned);
+  }
+  const int n = static_cast<int>(gyro_clean.size());
+  for (int k = 0; k < n; ++k) {
+    // The accelerometer's sample at t saw the motion of t - time_offset (the flight's ends repeat).
+    const Eigen::Vector3d& accel = accel_clean[static_cast<std::size_t>(std::clamp(k - lag, 0, n - 1))];
+    const Eigen::Vector3d gyro = gyro_clean[static_cast<std::size_t>(k)] + noise(kGyroStd);
+    flight.samples.push_back({k * kH, gyro, accel + noise(kAccelStd)});
   }
   return flight;
 }
@@ -366,6 +400,176 @@ TEST(DragVelocityEstimator, RefusesBadParamsAndConfigs) {
   p = flight_params();
   p.drag_linear.setZero();
   EXPECT_NO_THROW(DragVelocityEstimator(p, DragVelocityConfig{}));
+}
+
+// ---- The effects beyond the rigid body (docs/effects.md, "Live") ----
+
+// The filter's horizontal velocity error RMS (m/s) against the flight's ground velocity, from 10 s on.
+double velocity_rmse(const Flight& flight, const FullModelParams& params, double duration,
+                     DragVelocityCounters* counters = nullptr, double from = 10.0) {
+  DragVelocityEstimator estimator(params, flight_config());
+  const Estimates r = run(estimator, flight.samples);
+  EXPECT_FALSE(r.estimates.empty());
+  for (std::size_t i = 0; i < r.estimates.size(); ++i) EXPECT_EQ(r.estimates[i].t, flight.samples[r.index[i]].t);
+  if (counters) *counters = estimator.counters();
+  return errors(r, flight, from, duration, false).rms.norm();
+}
+
+// Flies with the truth's effect and estimates twice: given the truth, and given the truth without the effect.
+struct EffectRun {
+  double with = 0.0;     // m/s
+  double without = 0.0;  // m/s
+};
+EffectRun with_and_without(const FlightOptions& truth, const FullModelParams& without, double duration = 60.0,
+                           unsigned seed = 21) {
+  const Flight flight = fly(duration, seed, truth);
+  EffectRun out{velocity_rmse(flight, truth.params, duration), velocity_rmse(flight, without, duration)};
+  std::printf("velocity RMSE with the effect %.4f m/s, without %.4f m/s\n", out.with, out.without);
+  return out;
+}
+
+TEST(DragVelocityEffects, GyroBiasIsSubtractedFromEveryReading) {
+  // The filter's bias states track x and y on their own; the yaw rate's bias they cannot see (it turns v through
+  // w_z x v, and the drag measurement pulls it back), so without the parameter the error grows by about 1.7 times,
+  // not more: the assertion is that with it the flight is estimated as well as one without any extra bias.
+  FlightOptions truth;
+  truth.params.gyro_bias = {0.05, -0.04, 0.3};  // rad/s
+  const Flight flight = fly(60.0, 21, truth);
+  const double with = velocity_rmse(flight, truth.params, 60.0);
+  const double without = velocity_rmse(flight, flight_params(), 60.0);
+  const double unbiased = velocity_rmse(fly(60.0, 21), flight_params(), 60.0);
+  std::printf("velocity RMSE with the gyro bias %.4f m/s, without %.4f m/s, flight without it %.4f m/s\n", with,
+              without, unbiased);
+  EXPECT_LT(with, 0.7 * without);
+  EXPECT_LT(with, 1.05 * unbiased);
+  EXPECT_LT(with, 0.12);
+  // What is left for the filter's states is the flight's own small bias, not the parameter's.
+  DragVelocityEstimator estimator(truth.params, flight_config());
+  const Estimates r = run(estimator, flight.samples);
+  const Eigen::Vector2d remaining = fly(1.0, 21).gyro_bias_body;
+  EXPECT_LT((r.estimates.back().gyro_bias - remaining).norm(), 0.2 * remaining.norm());
+}
+
+TEST(DragVelocityEffects, AccelerometerScaleAndCrossAxisErrorsAreUndone) {
+  FlightOptions truth;
+  truth.params.accel_scale = {0.05, -0.04, 0.03};
+  truth.params.accel_cross << 0.0, 0.03, 0.02,  // x reads 2 % of z: 0.2 m/s^2 of thrust on a drag axis
+      -0.02, 0.0, -0.015,                         //
+      0.01, 0.01, 0.0;
+  const EffectRun r = with_and_without(truth, flight_params());
+  EXPECT_LT(r.with, 0.5 * r.without);
+  EXPECT_LT(r.with, 0.12);
+}
+
+TEST(DragVelocityEffects, TimeOffsetPairsTheAccelerometerWithTheGyroOfItsInstant) {
+  for (const double tau : {0.02, -0.02}) {
+    SCOPED_TRACE(tau);
+    FlightOptions truth;
+    truth.params.time_offset = tau;
+    truth.wobble = 0.05;  // 3 Hz: the lever arm's reading changes within 20 ms
+    FlightOptions no_offset = truth;
+    no_offset.params.time_offset = 0.0;
+    const EffectRun r = with_and_without(truth, no_offset.params);
+    EXPECT_LT(r.with, 0.5 * r.without);
+    EXPECT_LT(r.with, 0.12);
+    // The first 20 ms have no partner 20 ms back: counted, not estimated.
+    const Flight flight = fly(12.0, 21, truth);
+    DragVelocityCounters c;
+    velocity_rmse(flight, truth.params, 12.0, &c);
+    EXPECT_GE(c.aligning, 4u);
+    EXPECT_LE(c.aligning, 5u);
+    EXPECT_EQ(c.estimates_out + c.aligning + 4, flight.samples.size());
+  }
+}
+
+TEST(DragVelocityEffects, WindMakesTheDragActOnTheAirVelocityAndTheOutputIsTheGroundVelocity) {
+  FlightOptions truth;
+  truth.params.wind = {3.0, 0.0};  // m/s from the south, in the flight's frame (yaw 0 at its start)
+  const Flight flight = fly(60.0, 21, truth);
+  const double with = velocity_rmse(flight, truth.params, 60.0);
+  const double without = velocity_rmse(flight, flight_params(), 60.0);
+  std::printf("velocity RMSE with the wind %.4f m/s, without %.4f m/s\n", with, without);
+  EXPECT_LT(with, 0.5 * without);
+  EXPECT_LT(with, 0.12);
+  // The ground and the air velocity differ by the wind, so a small error against the ground's means the output is
+  // the ground velocity.
+  double air_minus_ground = 0.0;
+  for (std::size_t k = 0; k < flight.samples.size(); ++k) {
+    const Eigen::Vector3d wind_body = attitude(flight.samples[k].t).transpose() * Eigen::Vector3d(3.0, 0.0, 0.0);
+    air_minus_ground += wind_body.head<2>().squaredNorm();
+  }
+  EXPECT_GT(std::sqrt(air_minus_ground / flight.samples.size()), 20.0 * with);
+
+  // The same wind written in a world frame in which the flight starts at yaw 1 rad: wind_heading says so.
+  FullModelParams turned = truth.params;
+  const double psi0 = 1.0;
+  turned.wind = Eigen::Rotation2Dd(psi0) * truth.params.wind;
+  turned.wind_heading = psi0;
+  const double with_turned = velocity_rmse(flight, turned, 60.0);
+  turned.wind_heading = 0.0;  // the heading forgotten: the wind blows from the wrong side
+  const double heading_forgotten = velocity_rmse(flight, turned, 60.0);
+  std::printf("turned frame: with wind_heading %.4f m/s, without %.4f m/s\n", with_turned, heading_forgotten);
+  EXPECT_NEAR(with_turned, with, 0.1 * with);
+  EXPECT_LT(with_turned, 0.5 * heading_forgotten);
+}
+
+TEST(DragVelocityEffects, EveryEffectTogetherIsBitIdenticalForTheSameInput) {
+  FlightOptions truth;
+  truth.params.gyro_bias = {0.03, -0.04, 0.1};
+  truth.params.accel_scale = {0.05, -0.04, 0.03};
+  truth.params.accel_cross(0, 2) = 0.02;
+  truth.params.time_offset = 0.02;
+  truth.params.wind = {2.0, -1.0};
+  const Flight flight = fly(5.0, 22, truth);
+  DragVelocityEstimator a(truth.params, flight_config());
+  DragVelocityEstimator b(truth.params, flight_config());
+  const Estimates ra = run(a, flight.samples);
+  const Estimates rb = run(b, flight.samples);
+  ASSERT_EQ(ra.estimates.size(), rb.estimates.size());
+  for (std::size_t i = 0; i < ra.estimates.size(); ++i) {
+    EXPECT_EQ(ra.estimates[i].v, rb.estimates[i].v);
+    EXPECT_EQ(ra.estimates[i].v_var, rb.estimates[i].v_var);
+  }
+}
+
+TEST(DragVelocityEffects, RefusesParametersOutsideTheirRange) {
+  FullModelParams p = flight_params();
+  p.time_offset = 0.3;
+  EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
+  p = flight_params();
+  p.accel_scale.x() = -1.0;
+  EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
+  p = flight_params();
+  p.accel_cross(1, 1) = 0.01;
+  EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
+  p = flight_params();
+  p.wind.x() = std::nan("");
+  EXPECT_THROW(DragVelocityEstimator(p, DragVelocityConfig{}), std::invalid_argument);
+}
+
+TEST(VelocityEvaluation, ScoresInTheEstimatorsBodyFrame) {
+  // An IMU turned a quarter turn about z: the reference, in the series' (IMU) axes, is turned by R_bs before it is
+  // compared with the estimator's body-frame velocity.
+  const double duration = 40.0;
+  FlightOptions truth;
+  truth.params.mounting = {0.01, -0.02, kPi / 2};
+  const Flight flight = fly(duration, 23, truth);
+  const Eigen::Quaterniond imu_to_body(Eigen::AngleAxisd(truth.params.mounting.norm(),
+                                                         truth.params.mounting.normalized()));
+  ImuSeries series;
+  series.reference.emplace();
+  for (std::size_t k = 0; k < flight.samples.size(); ++k) {
+    series.t.push_back(flight.samples[k].t);
+    series.gyro.push_back(flight.samples[k].gyro);
+    series.accel.push_back(flight.samples[k].accel);
+    series.reference->velocity_ned.push_back(flight.velocity_ned[k]);
+    series.reference->attitude.push_back(Eigen::Quaterniond(attitude(series.t.back())) * imu_to_body);
+  }
+  const VelocityEvaluation e = evaluate_velocity(series, truth.params, TimeWindow{10.0, duration}, flight_config());
+  std::printf("estimator %.4f m/s, standing still %.4f m/s\n", e.estimator.horizontal, e.zero.horizontal);
+  EXPECT_LT(e.estimator.horizontal, 0.12);
+  EXPECT_LT(e.estimator.horizontal, 0.1 * e.zero.horizontal);
+  EXPECT_LT(e.estimator.horizontal, 0.5 * e.inversion.horizontal);
 }
 
 }  // namespace

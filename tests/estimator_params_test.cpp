@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <string>
+
 #include <nlohmann/json.hpp>
 
 #include "estimator/params.hpp"
@@ -18,6 +20,13 @@ ModelParams identified() {
   p.full.drag_linear = {0.35, 0.4};
   p.full.drag_quadratic = {0.04, 0.05};
   p.full.accel_bias = {0.05, -0.03, 0.1};
+  p.full.accel_scale = {0.01, -0.02, 0.005};
+  p.full.accel_cross << 0.0, 0.03, -0.01, 0.02, 0.0, 0.004, -0.006, 0.001, 0.0;
+  p.full.gyro_bias = {0.002, -0.001, 0.0005};
+  p.full.time_offset = -0.012;
+  p.full.wind = {2.5, -1.25};
+  p.full.wind_heading = 0.7;
+  p.effects = {"linear_drag", "wind", "accel_scale", "accel_cross", "gyro_bias", "time_offset"};
   p.identification = {.method = "ga+lm",
                       .seed = 42,
                       .fit_windows = {{0.0, 33.0}},
@@ -90,10 +99,160 @@ TEST(ModelParamsJson, RefusesOutOfRangeValuesOtherVersionsAndWrongTypes) {
   EXPECT_THROW(j.get<ModelParams>(), std::invalid_argument);
   j = identified();
   j["full"]["lever_arm"] = "0.1";
-  EXPECT_THROW(j.get<ModelParams>(), json::type_error);
+  EXPECT_THROW(j.get<ModelParams>(), std::invalid_argument);
   j = identified();
   j["full"]["lever_arm"] = {0.1, 0.2};  // three values expected
-  EXPECT_THROW(j.get<ModelParams>(), json::exception);
+  EXPECT_THROW(j.get<ModelParams>(), std::invalid_argument);
+}
+
+// The message of the std::invalid_argument that reading `j` throws ("" when it reads).
+std::string read_error(const json& j) {
+  try {
+    (void)j.get<ModelParams>();
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ModelParamsJson, RoundTripsEveryEffectField) {
+  const ModelParams p = identified();
+  const json j = json::parse(json(p).dump(2));
+  // Each field written where docs/estimator.md says, and read back to the bit.
+  EXPECT_EQ(j["full"]["accel_cross"][0][1].get<double>(), 0.03);
+  EXPECT_EQ(j["full"]["accel_cross"][1][0].get<double>(), 0.02);  // rows are the reading axis
+  EXPECT_EQ(j["full"]["time_offset"].get<double>(), -0.012);
+  EXPECT_NEAR(j["full"]["wind_heading_deg"].get<double>(), 0.7 * 180.0 / kPi, 1e-12);
+  EXPECT_EQ(j["effects"][1], "wind");
+  const ModelParams back = j.get<ModelParams>();
+  EXPECT_EQ(back.full.accel_scale, p.full.accel_scale);
+  EXPECT_EQ(back.full.accel_cross, p.full.accel_cross);
+  EXPECT_EQ(back.full.gyro_bias, p.full.gyro_bias);
+  EXPECT_EQ(back.full.time_offset, p.full.time_offset);
+  EXPECT_EQ(back.full.wind, p.full.wind);
+  EXPECT_EQ(back.full.wind_heading, p.full.wind_heading);
+  EXPECT_EQ(back.effects, p.effects);
+  EXPECT_EQ(back, p);
+  // Degrees alone are enough for the heading too, and disagreeing ones are refused.
+  EXPECT_NEAR(json::parse(R"({"full": {"wind_heading_deg": 90}})").get<ModelParams>().full.wind_heading, kPi / 2,
+              1e-15);
+  json edited = j;
+  edited["full"]["wind_heading_deg"] = 10.0;
+  EXPECT_NE(read_error(edited).find("wind_heading"), std::string::npos);
+}
+
+TEST(ModelParamsJson, FilesWithoutTheEffectKeysReadWithTheDefaults) {
+  json j = identified();
+  for (const char* key : {"accel_scale", "accel_cross", "gyro_bias", "time_offset", "wind", "wind_heading",
+                          "wind_heading_deg"})
+    j["full"].erase(key);
+  j.erase("effects");
+  const ModelParams p = j.get<ModelParams>();
+  EXPECT_EQ(p.full.accel_scale, Eigen::Vector3d::Zero());
+  EXPECT_EQ(p.full.accel_cross, Eigen::Matrix3d::Zero());
+  EXPECT_EQ(p.full.gyro_bias, Eigen::Vector3d::Zero());
+  EXPECT_EQ(p.full.time_offset, 0.0);
+  EXPECT_EQ(p.full.wind, Eigen::Vector2d::Zero());
+  EXPECT_EQ(p.full.wind_heading, 0.0);
+  EXPECT_TRUE(p.effects.empty());
+  EXPECT_EQ(p.full.drag_linear, identified().full.drag_linear);
+}
+
+TEST(ModelParamsJson, UnknownKeysAreRefusedWithTheirPathAndTheNearestValidKey) {
+  const struct {
+    const char* pointer;  // where to add the misspelt key
+    const char* key;
+    const char* path;
+    const char* guess;
+  } cases[] = {
+      {"", "efects", "efects", "effects"},
+      {"/paper/x", "alpah", "paper.x.alpah", "paper.x.alpha"},
+      {"/paper/y", "muu", "paper.y.muu", "paper.y.mu"},
+      {"/full", "acel_scale", "full.acel_scale", "full.accel_scale"},
+      {"/full", "wind_heading_degs", "full.wind_heading_degs", "full.wind_heading_deg"},
+      {"/identification", "methd", "identification.methd", "identification.method"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.path);
+    json j = identified();
+    j[json::json_pointer(c.pointer)][c.key] = 1.0;
+    const std::string error = read_error(j);
+    EXPECT_NE(error.find(std::string("unknown key \"") + c.path + "\""), std::string::npos) << error;
+    EXPECT_NE(error.find(std::string("did you mean \"") + c.guess + "\""), std::string::npos) << error;
+  }
+  // Far from every key: no guess, the valid keys listed instead.
+  json j = identified();
+  j["full"]["zzzzzzzzzzzz"] = 1.0;
+  const std::string error = read_error(j);
+  EXPECT_NE(error.find("full.zzzzzzzzzzzz"), std::string::npos) << error;
+  EXPECT_EQ(error.find("did you mean"), std::string::npos) << error;
+  EXPECT_NE(error.find("accel_cross"), std::string::npos) << error;
+  // Free-form maps keep their own keys.
+  j = identified();
+  j["identification"]["rmse"]["full.x.anything"] = 0.1;
+  EXPECT_EQ(read_error(j), "");
+}
+
+TEST(ModelParamsJson, WrongTypesAreRefusedNamingTheKeyAndTheTypeExpected) {
+  const struct {
+    const char* pointer;
+    json value;
+    const char* path;
+    const char* expected;
+  } cases[] = {
+      {"/full/time_offset", "0.01", "full.time_offset", "a number"},
+      {"/full/accel_scale", {0.1, 0.2}, "full.accel_scale", "an array of 3 numbers"},
+      {"/full/accel_cross", {0.0, 0.1, 0.2}, "full.accel_cross", "an array of 3 rows of 3 numbers"},
+      {"/full/wind", true, "full.wind", "an array of 2 numbers"},
+      {"/paper/x/r", json::array(), "paper.x.r", "a number"},
+      {"/identification/seed", -3, "identification.seed", "an unsigned integer"},
+      {"/identification/method", 5, "identification.method", "a string"},
+      {"/effects", "wind", "effects", "an array of effect names"},
+      {"/full", 3, "full", "an object"},
+      {"/version", "1", "version", "an integer"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.path);
+    json j = identified();
+    j[json::json_pointer(c.pointer)] = c.value;
+    const std::string error = read_error(j);
+    EXPECT_NE(error.find(std::string(c.path) + ": expected " + c.expected), std::string::npos) << error;
+  }
+}
+
+TEST(ModelParamsJson, EffectsMustBeOnesTheLiveEstimatorRuns) {
+  for (const char* effect : {"linear_drag", "quadratic_drag", "wind", "accel_bias", "accel_scale", "accel_cross",
+                             "gyro_bias", "time_offset", "thrust", "lever_arm_z", "self_consistent_velocity"}) {
+    EXPECT_EQ(live_effect_refusal(effect), std::nullopt) << effect;
+    json j = identified();
+    j["effects"] = {effect};
+    EXPECT_EQ(j.get<ModelParams>().effects, std::vector<std::string>{effect});
+  }
+  json j = identified();
+  j["effects"] = {"linear_drag", "vibration"};
+  std::string error = read_error(j);
+  EXPECT_NE(error.find("vibration"), std::string::npos) << error;
+  EXPECT_NE(error.find("measurement noise"), std::string::npos) << error;
+  EXPECT_NE(error.find("--lowpass"), std::string::npos) << error;
+  EXPECT_EQ(error.find('\n'), std::string::npos) << error;  // one line
+  j["effects"] = {"linear_drag", "qudratic_drag"};
+  error = read_error(j);
+  EXPECT_NE(error.find("unknown effect \"qudratic_drag\""), std::string::npos) << error;
+  EXPECT_NE(error.find("did you mean \"quadratic_drag\""), std::string::npos) << error;
+  j["effects"] = {"turbulence"};
+  EXPECT_NE(read_error(j).find("unknown effect \"turbulence\""), std::string::npos);
+}
+
+TEST(ModelParamsJson, RefusesEffectParametersOutOfRange) {
+  json j = identified();
+  j["full"]["time_offset"] = 0.3;
+  EXPECT_NE(read_error(j).find("time_offset"), std::string::npos);
+  j = identified();
+  j["full"]["accel_scale"] = {-1.0, 0.0, 0.0};
+  EXPECT_NE(read_error(j).find("accel_scale"), std::string::npos);
+  j = identified();
+  j["full"]["accel_cross"][2][2] = 0.01;
+  EXPECT_NE(read_error(j).find("accel_cross"), std::string::npos);
 }
 
 }  // namespace

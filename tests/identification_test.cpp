@@ -216,6 +216,17 @@ TEST(Windows, ParsesSecondsAndRejectsTheRest) {
     EXPECT_THROW(parse_window(bad), std::invalid_argument) << bad;
 }
 
+TEST(Windows, PercentagesAreFractionsOfTheDataSpan) {
+  const std::vector<double> t{10.0, 11.0, 12.0, 13.0, 14.0};  // data end 15 s: the span is [10, 15)
+  EXPECT_EQ(parse_window("0:40%", t), (TimeWindow{0.0, 12.0}));
+  EXPECT_EQ(parse_window("0%:40%", t), (TimeWindow{10.0, 12.0}));
+  EXPECT_EQ(parse_window("40%:", t), (TimeWindow{12.0, std::numeric_limits<double>::infinity()}));
+  EXPECT_EQ(parse_window("20%:100%", t), (TimeWindow{11.0, 15.0}));
+  for (const char* bad : {"50%:40%", "-1%:20%", "0:101%", "%:10", "10%%:20%"})
+    EXPECT_THROW(parse_window(bad, t), std::invalid_argument) << bad;
+  EXPECT_THROW(parse_window("0:40%"), std::invalid_argument);  // a percentage without the data
+}
+
 TEST(FullResidual, VanishesOnIdealDataAtTheTrueParameters) {
   // A perfect sensor at the paper's pose, the true angular acceleration and air velocity: the 3-D model at the
   // simulator's parameters leaves nothing but rounding.
@@ -426,6 +437,8 @@ TEST(VelocityEvaluation, NeedsAReferenceAndDrag) {
 
 // ---- reading a session ----
 
+constexpr double kYawRate = 0.4;  // rad/s: the reference turns about z at a constant rate
+
 class SessionSeriesTest : public ::testing::Test {
  protected:
   std::filesystem::path path_ =
@@ -440,13 +453,12 @@ class SessionSeriesTest : public ::testing::Test {
     s.device_time_us = device_us;
     s.recv_mono_ns = recv_ns;
     s.accel = {value, -value, -9.8};
-    s.gyro = {0.1 * value, 0.0, 0.0};
+    s.gyro = {0.0, 0.0, kYawRate};  // the turn the reference's attitude makes
     return s;
   }
 };
 
 constexpr std::int64_t kMono0 = 7'000'000'000;  // the session's monotonic clock at the first pose
-constexpr double kYawRate = 0.4;                // rad/s: the reference turns about z at a constant rate
 
 Eigen::Vector3d reference_velocity(double t) { return {1.0 + 0.5 * t, -2.0 * t, 0.1}; }
 
@@ -480,7 +492,8 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
     store.commit();
   }
   const store::Store store(path_, {.read_only = true});
-  const pipeline::SessionSeries plain = pipeline::read_session_series(store, session);
+  // Declared FRD: these samples' made-up specific force would make `auto` turn them x-up.
+  const pipeline::SessionSeries plain = pipeline::read_session_series(store, session, {.imu_axes = "frd"});
   EXPECT_EQ(plain.link_id, 1);  // the link with the most samples
   EXPECT_EQ(plain.counts.samples, 192u);
   EXPECT_EQ(plain.counts.time_not_increasing, 1u);
@@ -492,7 +505,7 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
   EXPECT_EQ(plain.series.accel[51].x(), 51.0);  // the repeat after sample 50 is gone
 
   const pipeline::SessionSeries with =
-      pipeline::read_session_series(store, session, {.reference = pipeline::ReferenceUse::required});
+      pipeline::read_session_series(store, session, {.reference = pipeline::ReferenceUse::required, .imu_axes = "frd"});
   EXPECT_EQ(with.counts.outside_reference, 1u);  // the first sample, received before the first pose
   EXPECT_EQ(with.counts.reference_rows, 101u);
   ASSERT_EQ(with.series.size(), 189u);

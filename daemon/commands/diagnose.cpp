@@ -1,6 +1,7 @@
 // `imubridge diagnose`: fit the base model to a recorded session, analyse what its residual still holds, add the
 // library's effects one at a time while they lower the validation error significantly, and write DIR/report.json
-// and DIR/report.html (docs/effects.md, docs/diagnose.md). A short summary for people goes to stderr.
+// and DIR/report.html (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
+// goes to stdout.
 #include <CLI/CLI.hpp>
 #include <charconv>
 #include <cmath>
@@ -13,6 +14,8 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/velocity_print.hpp"
+#include "daemon/daemon.hpp"
 #include "diagnose/report.hpp"
 #include "diagnose/search.hpp"
 #include "estimator/identify.hpp"
@@ -29,9 +32,11 @@ struct DiagnoseCliOptions {
   std::string db, report;
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
+  std::optional<std::string> imu_axes;
   std::string axis = "both", model = "paper";
   std::optional<std::string> velocity, train, validate;
-  std::vector<std::string> ignore_bands;
+  std::vector<std::string> ignore_bands, limits;
+  std::optional<std::string> out;
   int max_steps = 8;
   double lowpass_hz = 0.0;
 };
@@ -72,33 +77,59 @@ std::pair<double, double> parse_band(const std::string& text) {
 
 void print_params(const std::vector<dg::ParameterEstimate>& params) {
   for (const dg::ParameterEstimate& p : params)
-    std::fprintf(stderr, "    %-16s %12.6g ± %-10.3g %s\n", p.name.c_str(), p.value, p.std_error, p.unit.c_str());
+    std::printf("    %-16s %12.6g ± %-10.3g %s\n", p.name.c_str(), p.value, p.std_error, p.unit.c_str());
+}
+
+void print_fit_flags(const dg::ModelFit& fit) {
+  for (const std::string& b : fit.at_bounds) std::printf("  warning: %s\n", b.c_str());
+  for (const std::string& i : fit.implausible) std::printf("  warning: implausible: %s\n", i.c_str());
+}
+
+void print_velocity(const dg::ModelFit& fit) {
+  if (!fit.velocity) return;
+  print_velocity_scores(*fit.velocity);
 }
 
 void print_summary(const dg::Diagnosis& d, const std::string& report) {
-  std::fprintf(stderr, "diagnosed %s: %s model, axes", d.session.c_str(), d.model.c_str());
-  for (const std::string& a : d.axes) std::fprintf(stderr, " %s", a.c_str());
-  std::fprintf(stderr, ", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(),
+  for (const std::string& w : d.warnings) std::printf("warning: %s\n", w.c_str());
+  if (!d.imu_axes.empty()) std::printf("%s\n", d.imu_axes.c_str());
+  std::printf("diagnosed %s: %s model, axes", d.session.c_str(), d.model.c_str());
+  for (const std::string& a : d.axes) std::printf(" %s", a.c_str());
+  std::printf(", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(),
                d.train_start, d.train_end, d.validate_start, d.validate_end);
-  std::fprintf(stderr, "base: RMSE train %.4f, validation %.4f m/s^2\n", d.base.rmse_train, d.base.rmse_validation);
+  std::printf("base: RMSE train %.4f, validation %.4f m/s^2\n", d.base.rmse_train, d.base.rmse_validation);
   print_params(d.base.base_params);
+  print_velocity(d.base);
+  print_fit_flags(d.base);
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const dg::Step& s = d.steps[i];
-    std::fprintf(stderr, "step %zu: + %s: RMSE train %.4f -> %.4f, validation %.4f -> %.4f m/s^2\n", i + 1,
+    std::printf("step %zu: + %s: RMSE train %.4f -> %.4f, validation %.4f -> %.4f m/s^2\n", i + 1,
                  s.effect.c_str(), s.rmse_train_before, s.fit.rmse_train, s.rmse_validation_before,
                  s.fit.rmse_validation);
     print_params(s.params);
+    print_velocity(s.fit);
+    print_fit_flags(s.fit);
   }
   if (!d.last_candidates.empty()) {
     const dg::CandidateTrial& best = d.last_candidates.front();
-    if (best.skipped.empty())
-      std::fprintf(stderr, "stopped: the best candidate, %s (validation %.4f m/s^2, p = %.3g), is not significant\n",
-                   best.effect.c_str(), best.rmse_validation, best.p_value);
+    if (best.skipped.empty() && !best.rejected_by.empty())
+      std::printf("stopped: the best candidate, %s (validation %.4f m/s^2), fails the %s\n",
+                   best.effect.c_str(), best.rmse_validation, best.rejected_by.c_str());
+    else if (!best.skipped.empty())
+      std::printf("stopped: no candidate could be tried (%s: %s)\n", best.effect.c_str(),
+                   best.skipped.c_str());
+    for (const dg::CandidateTrial& c : d.last_candidates) {
+      if (c.skipped.rfind("implausible", 0) == 0)
+        std::printf("  refused %s: %s\n", c.effect.c_str(), c.skipped.c_str());
+    }
+  } else if (!d.steps.empty()) {
+    std::printf("stopped: the step limit (--max-steps) was reached\n");
   }
-  std::fprintf(stderr, "final residual %s\n", d.residual_white ? "white" : "NOT white");
+  std::printf("summary: %s\n", dg::summary_line(d).c_str());
+  std::printf("final residual %s\n", d.residual_white ? "white" : "NOT white");
   for (const dg::Unexplained& u : d.unexplained)
-    std::fprintf(stderr, "  unexplained (%s, axis %s): %s\n", u.kind.c_str(), u.axis.c_str(), u.where.c_str());
-  std::fprintf(stderr, "wrote %s/report.json and %s/report.html\n", report.c_str(), report.c_str());
+    std::printf("  unexplained (%s, axis %s): %s\n", u.kind.c_str(), u.axis.c_str(), u.where.c_str());
+  std::printf("wrote %s/report.json and %s/report.html\n", report.c_str(), report.c_str());
 }
 
 int run(const DiagnoseCliOptions& o) {
@@ -106,8 +137,7 @@ int run(const DiagnoseCliOptions& o) {
   options.model = parse_model(o.model);
   options.axes = parse_axes(o.axis);
   if (o.velocity) options.velocity = parse_velocity(*o.velocity);
-  if (o.train) options.train = est::parse_window(*o.train);
-  if (o.validate) options.validate = est::parse_window(*o.validate);
+  for (const std::string& limit : o.limits) est::override_limit(options.limits, limit);
   for (const std::string& band : o.ignore_bands) options.ignore_bands.push_back(parse_band(band));
   if (o.max_steps < 0) throw std::invalid_argument("--max-steps must be 0 or more");
   options.max_steps = o.max_steps;
@@ -122,15 +152,30 @@ int run(const DiagnoseCliOptions& o) {
                                  : *options.velocity == dg::VelocitySource::kReference ? ReferenceUse::required
                                                                                        : ReferenceUse::none;
   const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference});
+      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference,
+                                                       .imu_axes = o.imu_axes});
   options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
-  const dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
+  if (o.train) options.train = est::parse_window(*o.train, session.series.t);
+  if (o.validate) options.validate = est::parse_window(*o.validate, session.series.t);
+  dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
+  diagnosis.imu_axes = session.axes.description;
+  diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
 
   const std::filesystem::path dir(o.report);
   std::filesystem::create_directories(dir);
   dg::write_report_json(diagnosis, dir / "report.json");
   dg::write_report_html(diagnosis, dir);
   print_summary(diagnosis, o.report);
+  if (o.out) {
+    daemon::save_params(*o.out, diagnosis.final_params);
+    // Read back as run, replay and evaluate will: a model they would refuse is said so now, not at take-off.
+    try {
+      (void)daemon::load_params(*o.out);
+      std::printf("wrote %s: the final model, as run, replay and evaluate estimate with it\n", o.out->c_str());
+    } catch (const std::exception& e) {
+      std::printf("warning: wrote %s, but the live estimator refuses it: %s\n", o.out->c_str(), e.what());
+    }
+  }
   return 0;
 }
 
@@ -141,13 +186,19 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
   cmd->add_option("--session", o->session, "Session id")->required();
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
+  cmd->add_option("--imu-axes", o->imu_axes,
+                  "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
+                  "recorded, else auto; docs/estimator.md, IMU axes)");
   cmd->add_option("--axis", o->axis, "x | y | both")->capture_default_str();
   cmd->add_option("--model", o->model, "Base model: paper (eq. 14 per axis) | full (3-D rigid body and mounting)")
       ->capture_default_str();
   cmd->add_option("--velocity", o->velocity,
                   "reference | imu (integrated from the gyro, eq. 12); default: reference when the session has one");
-  cmd->add_option("--train", o->train, "Fit window T0:T1 in seconds from the session start (default 0:33)");
-  cmd->add_option("--validate", o->validate, "Validation window T0:T1 (default: from the end of --train on)");
+  cmd->add_option("--train", o->train,
+                  "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
+                  "(default 0:33)");
+  cmd->add_option("--validate", o->validate,
+                  "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
   cmd->add_option("--lowpass", o->lowpass_hz,
@@ -155,6 +206,13 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
                   "vibration swamps the accelerometers")
       ->capture_default_str();
   cmd->add_option("--report", o->report, "Directory for report.json and report.html (created if needed)")->required();
+  cmd->add_option("--out", o->out,
+                  "Write the final model (base plus every effect added, with standard errors) as PARAMS.json for "
+                  "run, replay and evaluate");
+  cmd->add_option("--limit", o->limits,
+                  "Override a plausibility limit, NAME=VALUE (repeatable): lever_arm (m), wind (m/s), accel_scale, "
+                  "accel_cross, gyro_bias (rad/s), accel_bias (m/s^2), time_offset (s); a candidate beyond one is "
+                  "refused");
   return [o] { return run(*o); };
 });
 

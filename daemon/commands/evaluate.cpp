@@ -12,6 +12,7 @@
 #include "daemon/command.hpp"
 #include "daemon/daemon.hpp"
 #include "estimator/identify.hpp"
+#include "estimator/velocity_scores.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
 
@@ -25,7 +26,8 @@ struct EvaluateCliOptions {
   std::string db, params;
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
-  std::optional<std::string> window;
+  std::optional<std::string> imu_axes;
+  std::optional<std::string> window, baseline_train;
 };
 
 json to_json(const est::VelocityError& e) {
@@ -34,10 +36,14 @@ json to_json(const est::VelocityError& e) {
 
 int run(const EvaluateCliOptions& o) {
   const est::ModelParams params = daemon::load_params(o.params);
-  const std::optional<est::TimeWindow> window = o.window ? std::optional(est::parse_window(*o.window)) : std::nullopt;
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required});
+      pipeline::read_session_series(store, o.session, {.link = o.link,
+                                                       .reference = pipeline::ReferenceUse::required,
+                                                       .imu_axes = o.imu_axes});
+  for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  const std::optional<est::TimeWindow> window =
+      o.window ? std::optional(est::parse_window(*o.window, session.series.t)) : std::nullopt;
   const est::VelocityEvaluation e =
       est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
   const est::DragVelocityCounters& c = e.counters;
@@ -62,7 +68,17 @@ int run(const EvaluateCliOptions& o) {
                       {"non_finite", session.counts.non_finite},
                       {"time_not_increasing", session.counts.time_not_increasing},
                       {"outside_reference", session.counts.outside_reference}}}};
-  std::printf("%s\n", out.dump(2).c_str());
+  json report = out;
+  if (o.baseline_train) {
+    // Trained on its own window, scored on the evaluation window: the same data the model is judged on.
+    const est::TimeWindow train = est::parse_window(*o.baseline_train, session.series.t);
+    const est::LinearDragBaseline b = est::linear_drag_baseline(session.series, {train, e.window});
+    report["rmse_m_s"]["linear_least_squares"] = to_json(b.scores.validation);
+    report["linear_least_squares"] = {{"train_window", {train.start, train.end}},
+                                      {"k", {b.k.x(), b.k.y()}},
+                                      {"b", {b.b.x(), b.b.y()}}};
+  }
+  std::printf("%s\n", report.dump(2).c_str());
   return 0;
 }
 
@@ -73,8 +89,14 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
   cmd->add_option("--session", o->session, "Session id (it needs a reference trajectory)")->required();
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
+  cmd->add_option("--imu-axes", o->imu_axes,
+                  "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
+                  "recorded, else auto; docs/estimator.md, IMU axes)");
   cmd->add_option("--params", o->params, "PARAMS.json, e.g. from `imubridge identify`")->required();
-  cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start (default: all)");
+  cmd->add_option("--baseline-train", o->baseline_train,
+                  "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
+                  "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
+  cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
   return [o] { return run(*o); };
 });
 

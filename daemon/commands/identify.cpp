@@ -17,6 +17,10 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/velocity_print.hpp"
+#include "daemon/daemon.hpp"
+#include "estimator/plausibility.hpp"
+#include "estimator/velocity_scores.hpp"
 #include "estimator/constants.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
@@ -31,9 +35,10 @@ struct IdentifyCliOptions {
   std::string db, out;
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
+  std::optional<std::string> imu_axes;
   std::string model = "paper", method = "lm", velocity = "eq12";
   std::optional<std::string> train, validate;
-  std::vector<std::string> hold;
+  std::vector<std::string> hold, limits;
   est::GaOptions ga;
 };
 
@@ -154,9 +159,9 @@ int run(const IdentifyCliOptions& o) {
   options.model = est::parse_model(o.model);
   options.method = est::parse_method(o.method);
   options.velocity = est::parse_velocity(o.velocity);
-  if (o.train) options.train = est::parse_window(*o.train);
-  if (o.validate) options.validate = est::parse_window(*o.validate);
   options.ga = o.ga;
+  est::PlausibilityLimits limits;
+  for (const std::string& limit : o.limits) est::override_limit(limits, limit);
   options.hold = parse_hold(o.hold);
   if (!o.hold.empty() && options.model != est::ModelKind::kFull)
     throw std::invalid_argument("--hold applies to --model full only");
@@ -165,17 +170,34 @@ int run(const IdentifyCliOptions& o) {
   const pipeline::SessionSeries session = pipeline::read_session_series(
       store, o.session,
       {.link = o.link,
+       // Read when present in any case: the velocity the model gives is scored against it.
        .reference = options.velocity == est::VelocitySource::kReference ? pipeline::ReferenceUse::required
-                                                                        : pipeline::ReferenceUse::none});
+                                                                        : pipeline::ReferenceUse::when_present,
+       .imu_axes = o.imu_axes});
+  for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (o.train) options.train = est::parse_window(*o.train, session.series.t);
+  if (o.validate) options.validate = est::parse_window(*o.validate, session.series.t);
   const est::IdentifyResult result = est::identify(session.series, options);
 
-  write_text(o.out, nlohmann::json(result.params).dump(2) + "\n");
+  daemon::save_params(o.out, result.params);
   if (!result.fits.front().convergence.empty()) {
     const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
     write_convergence(curve, result.fits);
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::fprintf(stderr, "%s\n", session.axes.description.c_str());
   print_summary(o, result, session.link_id, wall);
+  // What the identified model does for the velocity, and whether its values are those of a real airframe.
+  const est::Identification& id = result.params.identification;
+  const est::Windows windows{id.fit_windows.front(), id.validation_windows.front()};
+  if (const auto scores = est::score_velocity(session.series, result.params, windows)) {
+    const est::VelocityScores zero = est::zero_velocity_scores(session.series, result.params.full.mounting, windows);
+    print_velocity_scores(*scores, "");
+    std::printf("zero velocity scores train %.3f, validation %.3f m/s (horizontal)\n", zero.train.horizontal,
+                zero.validation.horizontal);
+  }
+  for (const est::Implausibility& i : est::check_plausibility(result.params.full, limits))
+    std::printf("warning: implausible: %s\n", i.message.c_str());
   return 0;
 }
 
@@ -185,11 +207,20 @@ const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
   cmd->add_option("--session", o->session, "Session id")->required();
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
+  cmd->add_option("--imu-axes", o->imu_axes,
+                  "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
+                  "recorded, else auto; docs/estimator.md, IMU axes)");
   cmd->add_option("--model", o->model, "paper (eq. 14, pitch and roll axes) | full (the 3-D model)")
       ->capture_default_str();
   cmd->add_option("--method", o->method, "ga (the paper's) | lm (Levenberg-Marquardt) | ga+lm")->capture_default_str();
-  cmd->add_option("--train", o->train, "Fit window T0:T1 in seconds from the session start (default 0:33)");
-  cmd->add_option("--validate", o->validate, "Validation window T0:T1 (default: from the end of --train on)");
+  cmd->add_option("--train", o->train,
+                  "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
+                  "(default 0:33)");
+  cmd->add_option("--validate", o->validate,
+                  "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
+  cmd->add_option("--limit", o->limits,
+                  "Override a plausibility limit, NAME=VALUE (repeatable): lever_arm (m), wind (m/s), accel_scale, "
+                  "accel_cross, gyro_bias (rad/s), accel_bias (m/s^2), time_offset (s)");
   cmd->add_option("--velocity", o->velocity, "Velocity in the drag term: eq12 (from the gyro) | reference")
       ->capture_default_str();
   cmd->add_option("--hold", o->hold,

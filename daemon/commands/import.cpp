@@ -16,6 +16,7 @@ struct ImportCommandOptions {
   std::string db = daemon::StoreConfig{}.path.string();
   double accel_lsb = replay::EurocImportOptions{}.accel_lsb;
   double gyro_lsb = replay::EurocImportOptions{}.gyro_lsb;
+  std::string imu_axes = "auto";
 };
 
 void print_lines(const char* what, const replay::ImportedFile& file, const replay::LinesByReason& lines) {
@@ -26,13 +27,17 @@ void print_lines(const char* what, const replay::ImportedFile& file, const repla
 }
 
 int run_import(const ImportCommandOptions& o) {
-  replay::EurocImportOptions options{.dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb};
+  replay::EurocImportOptions options{
+      .dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb, .imu_axes = o.imu_axes};
   if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
   store::Store store(o.db);
   const auto r = replay::import_euroc(store, options);
   std::fprintf(stderr, "imported %llu IMU rows of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.imu.rows), r.imu.path.c_str(), o.db.c_str(),
                static_cast<long long>(r.session));
+  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
+  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
+  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
   print_lines("skipped", r.imu, r.imu.skipped);
   print_lines("warning: clipped values in", r.imu, r.clipped);
   if (r.reference) {
@@ -59,6 +64,10 @@ const RegisterCommand kImport([](CLI::App& app) -> CommandRunner {
       ->needs(reference)
       ->capture_default_str();
   cmd->add_option("--db", o->db, "The session store to import into")->capture_default_str();
+  cmd->add_option("--imu-axes", o->imu_axes,
+                  "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
+                  "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes)")
+      ->capture_default_str();
   cmd->add_option("--accel-lsb", o->accel_lsb, "Accelerometer resolution of the imported frames, m/s^2 per count")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -17,6 +17,7 @@
 
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
+#include "estimator/imu_axes.hpp"
 #include "pipeline/link_recorder.hpp"
 #include "pipeline/session_config.hpp"
 #include "protocol/calibration.hpp"
@@ -39,6 +40,7 @@ struct SimOptions {
   std::string protocol = "imubridge";
   double speed = 1.0;
   std::string db, euroc, pty, file;
+  std::string imu_axes = "frd";
 };
 
 volatile std::sig_atomic_t g_stop = 0;
@@ -56,6 +58,32 @@ sim::SimConfig make_config(const SimOptions& o) {
   return config;
 }
 
+// The IMU mounted in other axes: each reading's vectors turned by R_bs^T (v_imu = R_bs^T v_body), then quantised
+// again, so what the frames carry is what such a sensor would send. The signed-axis conventions land exactly on the
+// count grid of a symmetric calibration. frd leaves the sample untouched.
+struct AxesWriter {
+  estimator::ImuAxes axes;
+  const protocol::Calibration& calibration;
+
+  sim::SimSample operator()(const sim::SimSample& in) const {
+    if (estimator::is_identity(axes)) return in;
+    const Eigen::Matrix3d r = axes.imu_to_body.transpose();
+    sim::SimSample s = in;
+    const auto array_of = [](const Eigen::Vector3d& v) { return std::array{v.x(), v.y(), v.z()}; };
+    for (sim::ImuReading* m : {&s.ideal, &s.measured}) {
+      m->accel = r * m->accel;
+      m->gyro = r * m->gyro;
+      m->mag = r * m->mag;
+    }
+    s.raw = calibration.to_counts(array_of(s.measured.accel), array_of(s.measured.gyro), array_of(s.measured.mag),
+                                  s.measured.temperature_c);
+    const protocol::Sample decoded = calibration.to_sample(s.raw);
+    const auto vector_of = [](const std::array<double, 3>& a) { return Eigen::Vector3d(a[0], a[1], a[2]); };
+    s.measured = {vector_of(decoded.accel), vector_of(decoded.gyro), vector_of(decoded.mag), decoded.temperature_c};
+    return s;
+  }
+};
+
 nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
   return {{"scenario", o.scenario},      {"seed", o.seed},         {"duration_s", config.duration_s},
           {"rate_hz", config.imu.rate_hz}, {"effects", o.effects}, {"protocol", o.protocol}};
@@ -68,7 +96,8 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
   nlohmann::json description = describe(o, config);
-  pipeline::add_recorded_links(description, {{"sim", format, config.imu.calibration}});
+  pipeline::add_recorded_links(description, {{"sim", format, config.imu.calibration, o.imu_axes}});
+  const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
   const std::int64_t session = store.begin_session(
       {.kind = "sim", .source = "imubridge sim " + describe(o, config).dump(), .config = description.dump(),
        .started_wall_ns = start_wall});
@@ -82,7 +111,7 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
     last_ns = to_ns(s.time_s);
     bytes.clear();
     samples.clear();
-    encoder.encode(s, bytes);
+    encoder.encode(in_axes(s), bytes);
     if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
     const auto& q = s.truth.attitude;
     store.append_reference(session, {.t_ns = last_ns,
@@ -124,12 +153,18 @@ int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
   imu.precision(17);
   truth.precision(17);
   const Eigen::Matrix3d zup_from_ned = Eigen::Vector3d(1, -1, -1).asDiagonal();
-  const Eigen::Matrix3d body_from_sensor = config.imu.pose.sensor_from_body.transpose();
+  const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
+  // The sensor's axes are the mounted ones turned by R_bs^T: sensor -> body takes R_bs first.
+  const Eigen::Matrix3d body_from_sensor =
+      estimator::is_identity(in_axes.axes)
+          ? Eigen::Matrix3d(config.imu.pose.sensor_from_body.transpose())
+          : Eigen::Matrix3d(config.imu.pose.sensor_from_body.transpose() * in_axes.axes.imu_to_body);
   const Eigen::Vector3d& r = config.imu.pose.position_m;
   const auto& errors = config.imu.errors;
   const std::int64_t t0 = 1'000'000'000'000'000'000;  // an EuRoC-like epoch stamp, fixed so files are reproducible
   std::uint64_t n = 0;
-  sim::simulate(config, [&](const sim::SimSample& s) {
+  sim::simulate(config, [&](const sim::SimSample& sample) {
+    const sim::SimSample s = in_axes(sample);
     const std::int64_t t = t0 + to_ns(s.time_s);
     const auto& m = s.measured;
     imu << t << ',' << m.gyro.x() << ',' << m.gyro.y() << ',' << m.gyro.z() << ',' << m.accel.x() << ','
@@ -180,13 +215,14 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
     written += bytes.size();
     bytes.clear();
   };
+  const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
   sim::Simulator simulator(config);
   double t = 0;
   while (!g_stop) {
     auto s = simulator.next();
     if (!s) break;
     t = s->time_s;
-    encoder.encode(*s, bytes);
+    encoder.encode(in_axes(*s), bytes);
     deliver(t);
   }
   encoder.flush(bytes);
@@ -219,6 +255,18 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
       ->capture_default_str();
   cmd->add_option("--speed", o->speed, "Pace for --pty, as a multiple of real time")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--imu-axes", o->imu_axes,
+                  "The IMU's axes in the samples: frd, flu, x-up, x-down, y-up, y-down, R:r00,...,r22 or q:w,x,y,z "
+                  "(IMU -> body); the reference stays the body's (docs/estimator.md, IMU axes)")
+      ->check([](const std::string& text) {
+        try {
+          if (estimator::parse_imu_axes(text).automatic) return std::string("a simulated IMU has definite axes");
+          return std::string();
+        } catch (const std::invalid_argument& e) {
+          return std::string(e.what());
+        }
+      })
       ->capture_default_str();
   auto* out = cmd->add_option_group("output", "Where the flight goes (exactly one)");
   out->add_option("--db", o->db, "Record into this SQLite store as a new session (prints its id last)");

@@ -1,0 +1,130 @@
+#include "diagnose/live_model.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "estimator/identify.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+using Eigen::Vector3d;
+
+// "k.x" -> 0, "bias.z" -> 2: the axis letter a per-axis parameter's name ends with.
+int axis_of(const std::string& name) {
+  const char last = name.empty() ? '?' : name.back();
+  if (last < 'x' || last > 'z') throw std::logic_error("diagnose: parameter " + name + " names no axis");
+  return last - 'x';
+}
+
+// The yaw (rad) of a body -> NED attitude.
+double yaw_of(const Eigen::Quaterniond& q) {
+  const Eigen::Matrix3d r = q.toRotationMatrix();
+  return std::atan2(r(1, 0), r(0, 0));
+}
+
+}  // namespace
+
+estimator::ModelParams live_params(const Model& model, std::span<const double> p, std::span<const double> std_errors,
+                                   Range train, Range validation) {
+  const ModelSetup& setup = model.setup();
+  const Signals& signals = model.signals();
+  const std::vector<Parameter>& parameters = model.parameters();
+  estimator::ModelParams out;
+  estimator::FullModelParams& full = out.full;
+  std::vector<std::string> paths(parameters.size());
+
+  if (setup.base == BaseModel::kFull) {
+    for (int i = 0; i < 3; ++i) {
+      full.lever_arm[i] = p[i];
+      full.mounting[i] = p[3 + i];
+      paths[i] = "full.lever_arm." + std::to_string(i);
+      paths[3 + i] = "full.mounting." + std::to_string(i);
+    }
+  } else {
+    for (std::size_t i = 0; i < setup.axes.size(); ++i) {
+      const estimator::PaperAxisParams axis{p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]};
+      const std::string prefix = setup.axes[i] == 0 ? "paper.x." : "paper.y.";
+      (setup.axes[i] == 0 ? out.paper_x : out.paper_y) = axis;
+      paths[4 * i] = prefix + "r", paths[4 * i + 1] = prefix + "beta", paths[4 * i + 2] = prefix + "alpha";
+      paths[4 * i + 3] = prefix + "mu";
+    }
+    full = estimator::full_from_paper(out.paper_x, out.paper_y);
+  }
+  // The full model's residual frame is the body's: a bias found there is R_bs^T b in IMU axes.
+  const Eigen::Matrix3d imu_to_body =
+      setup.base == BaseModel::kFull ? rotation_matrix(full.mounting) : Eigen::Matrix3d::Identity();
+
+  const ModelInputs inputs = model.inputs(p);
+  for (std::size_t e = 0; e < model.effects().size(); ++e) {
+    const std::string name(model.effects()[e]->name());
+    out.effects.push_back(name);
+    Vector3d body_bias = Vector3d::Zero();
+    for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e) + model.effect_size(e); ++i) {
+      const std::string& pname = parameters[i].name;
+      const double v = p[i];
+      if (name == "linear_drag") {
+        full.drag_linear[axis_of(pname)] += v;
+        paths[i] = "full.drag_linear." + std::to_string(axis_of(pname));
+      } else if (name == "quadratic_drag") {
+        full.drag_quadratic[axis_of(pname)] += v;
+        paths[i] = "full.drag_quadratic." + std::to_string(axis_of(pname));
+      } else if (name == "wind") {
+        full.wind[pname == "north" ? 0 : 1] = v;
+        paths[i] = std::string("full.wind.") + (pname == "north" ? "0" : "1");
+      } else if (name == "accel_bias") {
+        body_bias[axis_of(pname)] = v;
+        paths[i] = "full.accel_bias." + std::to_string(axis_of(pname));
+      } else if (name == "accel_scale") {
+        full.accel_scale[axis_of(pname)] = v;
+        paths[i] = "full.accel_scale." + std::to_string(axis_of(pname));
+      } else if (name == "accel_cross") {  // "cross.xy": axis x reads a fraction of axis y
+        const int a = pname[pname.size() - 2] - 'x', b = pname.back() - 'x';
+        full.accel_cross(a, b) = v;
+        paths[i] = "full.accel_cross." + std::to_string(a) + std::to_string(b);
+      } else if (name == "gyro_bias") {
+        full.gyro_bias[axis_of(pname)] = v;
+        paths[i] = "full.gyro_bias." + std::to_string(axis_of(pname));
+      } else if (name == "time_offset") {
+        full.time_offset = v;
+        paths[i] = "full.time_offset";
+      } else {
+        // lever_arm_z (the 3-D lever arm has its z), vibration (refused live, with its reason, when PARAMS.json is
+        // read): kept under the effect's own name.
+        paths[i] = "effects." + name + "." + pname;
+      }
+    }
+    if (name == "accel_bias") full.accel_bias += imu_to_body.transpose() * body_bias;
+    if (name == "wind" && !inputs.attitude.empty()) full.wind_heading = yaw_of(inputs.attitude.front());
+  }
+
+  estimator::Identification& id = out.identification;
+  id.method = "diagnose";
+  const auto window = [&](Range r) {
+    const double end = r.first + r.count < signals.size() ? signals.t[r.first + r.count]
+                                                            : signals.t.back() + 1.0 / signals.rate_hz;
+    return estimator::TimeWindow{signals.t[r.first], end};
+  };
+  id.fit_windows = {window(train)};
+  id.validation_windows = {window(validation)};
+  for (std::size_t i = 0; i < paths.size() && i < std_errors.size(); ++i) {
+    if (!paths[i].empty() && std::isfinite(std_errors[i])) id.std_errors[paths[i]] = std_errors[i];
+  }
+  // The live filter sees the whole band, so its noise comes from the residual without the band limit.
+  ModelSetup whole_band = setup;
+  whole_band.lowpass_hz = 0.0;
+  const Model unfiltered(signals, whole_band, model.effects());
+  const std::string model_name = setup.base == BaseModel::kFull ? "full." : "paper.";
+  for (const auto& [set, range] : {std::pair{"fit", train}, std::pair{"validation", validation}}) {
+    const AxisValues residual = unfiltered.evaluate(p, range).residual();
+    for (std::size_t i = 0; i < residual.size(); ++i) {
+      double sum = 0.0;
+      for (double r : residual[i]) sum += r * r;
+      id.rmse[model_name + axis_name(setup.axes[i]) + "." + set] =
+          std::sqrt(sum / static_cast<double>(std::max<std::size_t>(residual[i].size(), 1)));
+    }
+  }
+  return out;
+}
+
+}  // namespace imubridge::diagnose

@@ -1,0 +1,21 @@
+#pragma once
+// The model a diagnosis ends with, as the live estimator runs it: a fitted diagnose::Model (base plus effects) turned
+// into PARAMS.json's estimator::ModelParams, so `run`, `replay` and `evaluate` estimate with exactly what the loop
+// found (docs/effects.md, "Live"). One place maps every effect's parameters onto the estimator's.
+#include <span>
+#include <string>
+#include <vector>
+
+#include "diagnose/model.hpp"
+#include "estimator/params.hpp"
+
+namespace imubridge::diagnose {
+
+// The parameters of `model` at `values` (standard errors, when given, go into identification.std_errors under the
+// same path as the value they belong to). The identification block records the windows, and per diagnosed axis the
+// residual RMS over the whole band (the filter's measurement noise follows it: estimator::config_for), keyed
+// "<full|paper>.<axis>.<fit|validation>".
+estimator::ModelParams live_params(const Model& model, std::span<const double> values,
+                                   std::span<const double> std_errors, Range train, Range validation);
+
+}  // namespace imubridge::diagnose

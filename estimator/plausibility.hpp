@@ -1,0 +1,49 @@
+#pragma once
+// What a multirotor's identified model may physically be (docs/identification.md, "Plausibility"). A fit can buy a
+// lower residual with values no airframe has: a lever arm longer than the vehicle, a gale inside a hall, a sensor
+// whose scale is off by a third. `identify` flags such values; `diagnose` refuses the candidate that needs them.
+// One table, here; every limit can be overridden on the command line (--limit NAME=VALUE).
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "estimator/full_model.hpp"
+
+namespace imubridge::estimator {
+
+struct PlausibilityLimits {
+  // |lever arm|, m: the IMU sits on the airframe; 0.5 m is half the diagonal of a large (1 m) multirotor.
+  double lever_arm = 0.5;
+  // |wind|, m/s: beyond a strong breeze (Beaufort 8 starts at 17 m/s) small multirotors do not fly.
+  double wind = 20.0;
+  // |accel_scale| per axis: MEMS accelerometers are specified to a few percent of sensitivity error.
+  double accel_scale = 0.10;
+  // |accel_cross| per pair of axes: datasheet cross-axis sensitivity is 1-2 %, mounting adds little more.
+  double accel_cross = 0.05;
+  // |gyro bias| per axis, rad/s (5.7 deg/s): far beyond any MEMS gyro's zero-rate offset after start-up.
+  double gyro_bias = 0.1;
+  // |accel bias| per axis, m/s^2 (0.1 g): beyond MEMS accelerometers' zero-g offsets (typically 0.02-0.06 g).
+  double accel_bias = 1.0;
+  // |time offset| between accelerometer and gyro, s: one device's filters and buses delay by milliseconds to tens.
+  double time_offset = 0.1;
+};
+
+// One limit the values exceed, in a line a person reads: "wind 31.2 m/s exceeds its limit 20 m/s (--limit wind=...)".
+struct Implausibility {
+  std::string limit;  // the limit's name, as --limit takes it
+  double value = 0.0;
+  double bound = 0.0;
+  std::string message;
+};
+
+// Every limit the model's values exceed (an empty list: plausible).
+std::vector<Implausibility> check_plausibility(const FullModelParams& params, const PlausibilityLimits& limits = {});
+
+// The limits' names and values, in the table's order (for --help and the docs).
+std::vector<std::pair<std::string, double>> limit_table(const PlausibilityLimits& limits = {});
+
+// Applies "NAME=VALUE" (VALUE > 0) to `limits`; throws std::invalid_argument naming the valid limits otherwise.
+void override_limit(PlausibilityLimits& limits, std::string_view assignment);
+
+}  // namespace imubridge::estimator

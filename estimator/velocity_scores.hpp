@@ -1,0 +1,39 @@
+#pragma once
+// What a model does for the velocity a user flies with: the drag-velocity estimator run with the model over a flight
+// that has a reference, scored on the training and validation windows. identify and diagnose report it for every
+// model they fit, in m/s beside the specific-force residual.
+#include <optional>
+#include <string>
+
+#include "estimator/identify.hpp"
+#include "estimator/imu_series.hpp"
+#include "estimator/params.hpp"
+
+namespace imubridge::estimator {
+
+struct VelocityScores {
+  VelocityError train, validation;
+  // Non-empty when the estimator gives no velocity with this model (no drag law on an axis yet): the scores are then
+  // zero velocity's, which is what such a model tells a user, and this says so.
+  std::string note;
+};
+
+// Nothing without a reference. The filter's settings follow the parameters (config_for), as in run and replay.
+std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
+                                             const Windows& windows);
+
+// "Not moving": the reference's own RMS horizontal speed on each window, in the body frame `mounting` defines.
+VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector3d& mounting, const Windows& windows);
+
+// The two-parameter baseline a reference makes possible, the way PX4's drag-tuning script identifies its coefficient:
+// per horizontal body axis, a least-squares line a = -k v + b between the accelerometer and the reference velocity
+// on the training window, then v = (b - a) / k sample by sample. A model must beat this to be worth its parameters.
+struct LinearDragBaseline {
+  Eigen::Vector2d k = Eigen::Vector2d::Zero();  // 1/s
+  Eigen::Vector2d b = Eigen::Vector2d::Zero();  // m/s^2
+  VelocityScores scores;
+};
+// Throws std::invalid_argument without a reference, or when an axis's training velocity does not vary.
+LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& windows);
+
+}  // namespace imubridge::estimator
