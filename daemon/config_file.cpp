@@ -15,6 +15,7 @@
 
 #include "daemon/endpoint.hpp"
 #include "daemon/vehicle_feedback.hpp"
+#include "estimator/edit_distance.hpp"
 #include "estimator/imu_axes.hpp"
 #include "pipeline/session_config.hpp"
 #include "protocol/hex.hpp"
@@ -22,23 +23,9 @@
 namespace imubridge::daemon {
 namespace {
 
+using estimator::edit_distance;
 using nlohmann::json;
 constexpr double kMiB = 1024.0 * 1024.0;
-
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t substitution = diagonal + (a[i - 1] != b[j - 1]);
-      diagonal = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, substitution});
-    }
-  }
-  return row[b.size()];
-}
 
 // The known key a typo most likely meant: one containing the other ("baudrate" -> "baud"), else the nearest within
 // a third of its length.

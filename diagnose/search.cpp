@@ -173,10 +173,11 @@ std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params,
   std::vector<std::string> out;
   for (std::size_t i = 0; i < params.size(); ++i) {
     const Parameter& p = params[i];
-    const bool two_sided = std::isfinite(p.lower) && std::isfinite(p.upper);
+    // Within 1 % of the bound's own size; a bound of zero (no negative drag) only when the fit sits on it, as a
+    // bounded solver leaves a parameter it pushed there.
     const auto near = [&](double bound) {
-      const double scale = two_sided ? p.upper - p.lower : std::abs(bound);
-      return std::isfinite(bound) && std::abs(values[i] - bound) <= kAtBoundFraction * scale;
+      const double tolerance = bound == 0.0 ? kOnZeroBound : kAtBoundFraction * std::abs(bound);
+      return std::isfinite(bound) && std::abs(values[i] - bound) <= tolerance;
     };
     const bool lower = near(p.lower), upper = near(p.upper);
     if (!lower && !upper) continue;

@@ -53,9 +53,10 @@ struct FTest {
 };
 FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff);
 
-// A parameter within this fraction of its search range (or of the bound's size, for a one-sided range) is "at the
-// bound": the data pushed it to the edge, so its value says more about the range than about the vehicle.
+// A parameter within this fraction of a bound's size (on it, for a bound of zero) is "at the bound": the data pushed it
+// to the edge, so its value says more about the range than about the vehicle.
 inline constexpr double kAtBoundFraction = 0.01;
+inline constexpr double kOnZeroBound = 1e-9;
 // One readable line per parameter at a bound, "<owner> <name> = <value> <unit> is at its lower bound 0: ...";
 // owners[i] names parameter i's effect (or "base").
 std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params, std::span<const double> values,

@@ -237,18 +237,29 @@ ModelKind parse_model(std::string_view text) { return parse(text, kModels, "mode
 Method parse_method(std::string_view text) { return parse(text, kMethods, "method"); }
 VelocitySource parse_velocity(std::string_view text) { return parse(text, kVelocities, "velocity source"); }
 
+TimeWindow data_span(std::span<const double> t) {
+  if (t.empty()) throw std::invalid_argument("no samples");
+  return {t.front(), data_end(t)};
+}
+
 TimeWindow parse_window(std::string_view text, std::span<const double> t) {
+  return t.empty() ? parse_window(text, TimeWindow{0.0, 0.0}) : parse_window(text, data_span(t));
+}
+
+TimeWindow parse_window(std::string_view text, const TimeWindow& span) {
+  const bool has_span = span.start < span.end;
   bool needs_span = false;
-  // A number of seconds, or a percentage (0 to 100) of the data's span from its first sample.
+  // Seconds, or percentages (0 to 100) of the span from its start: one "%" makes both ends percentages, so that
+  // "0:40%" is the first 40 %.
+  const bool percent = text.find('%') != std::string_view::npos;
   const auto number = [&](std::string_view piece, double& x) {
-    const bool percent = !piece.empty() && piece.back() == '%';
-    if (percent) piece.remove_suffix(1);
+    if (percent && !piece.empty() && piece.back() == '%') piece.remove_suffix(1);
     const auto [end, error] = std::from_chars(piece.data(), piece.data() + piece.size(), x);
     if (error != std::errc() || end != piece.data() + piece.size() || !std::isfinite(x)) return false;
     if (!percent) return true;
     if (x < 0.0 || x > 100.0) return false;
-    if (t.empty()) return needs_span = true;
-    x = t.front() + x / 100.0 * (data_end(t) - t.front());
+    if (!has_span) return needs_span = true;
+    x = span.start + x / 100.0 * (span.end - span.start);
     return true;
   };
   const std::size_t colon = text.find(':');

@@ -51,10 +51,14 @@ struct IdentifyOptions {
 
 // ---- windows ----
 
-// "T0:T1" in seconds of session time; "T0:" runs to the end of the data. Either end may be a percentage of the
-// data's span instead ("0:40%", "40%:"), which needs the samples' times `t` to resolve. Throws std::invalid_argument
-// otherwise.
+// "T0:T1" in seconds of session time; "T0:" runs to the end of the data. With a "%" on either end both ends are
+// percentages of the data's span instead ("0:40%" is its first 40 %, "40%:" the rest), which needs the samples'
+// times `t` to resolve. Throws std::invalid_argument otherwise.
 TimeWindow parse_window(std::string_view text, std::span<const double> t = {});
+// The same with percentages of `span` instead of the data's (e.g. the flight: estimator/flight_span.hpp).
+TimeWindow parse_window(std::string_view text, const TimeWindow& span);
+// The data's span: from the first sample to the end of the last, [t_0, t_last + last period).
+TimeWindow data_span(std::span<const double> t);
 
 struct Windows {
   TimeWindow train, validate;

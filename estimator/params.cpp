@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "estimator/constants.hpp"
+#include "estimator/edit_distance.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -40,22 +41,6 @@ constexpr std::array<std::string_view, 6> kIdentificationKeys = {"method",     "
 
 std::string join(const std::string& path, std::string_view key) {
   return path.empty() ? std::string(key) : path + "." + std::string(key);
-}
-
-// Levenshtein distance: insertions, deletions and substitutions, one each.
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t above = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diagonal = above;
-    }
-  }
-  return row[b.size()];
 }
 
 // The valid name nearest `name`, when it is near enough to be a typo: a third of its length, at least 2 edits.

@@ -339,21 +339,21 @@ namespace imubridge::diagnose {
 namespace {
 
 TEST(AtBounds, AParameterOnOrWithinOnePercentOfABoundIsFlagged) {
-  const std::vector<Parameter> params{{"k.x", "1/s", 0.0, 0.0, 100.0},      // two-sided: 1 % of the range is 1
-                                      {"scale.x", "", 0.0, -0.5, 0.5},     // 1 % is 0.01
+  const std::vector<Parameter> params{{"k.x", "1/s", 0.0, 0.0, 100.0},      // on 0, or within 1 of 100
+                                      {"scale.x", "", 0.0, -0.5, 0.5},     // within 0.005 of either
                                       {"r", "m", 0.0, 0.0},                // one-sided at 0: only 0 itself
                                       {"free", "m"}};                      // unbounded: never
   const std::vector<std::string> owners{"linear_drag", "accel_scale", "base", "base"};
   const auto flagged = [&](std::vector<double> values) { return parameters_at_bounds(params, values, owners); };
-  EXPECT_TRUE(flagged({50.0, 0.0, 0.1, 1e6}).empty());
-  const auto lines = flagged({0.5, -0.495, 0.0, -1e9});
+  EXPECT_TRUE(flagged({0.18, 0.0, 0.1, 1e6}).empty());  // a real drag of 0.18 1/s is not at its bound 0
+  const auto lines = flagged({0.0, -0.4975, 0.0, -1e9});
   ASSERT_EQ(lines.size(), 3u);
   EXPECT_NE(lines[0].find("linear_drag k.x"), std::string::npos) << lines[0];
   EXPECT_NE(lines[0].find("lower bound 0"), std::string::npos) << lines[0];
   EXPECT_NE(lines[1].find("accel_scale scale.x"), std::string::npos) << lines[1];
   EXPECT_NE(lines[2].find("base r"), std::string::npos) << lines[2];
-  EXPECT_EQ(flagged({98.0, 0.48, 1e-3, 0.0}).size(), 0u);  // just outside 1 %
-  EXPECT_EQ(flagged({99.5, 0.5, 0.0, 0.0}).size(), 3u);      // upper bounds too
+  EXPECT_EQ(flagged({98.9, 0.494, 1e-6, 0.0}).size(), 0u);  // just outside
+  EXPECT_EQ(flagged({99.5, 0.5, 0.0, 0.0}).size(), 3u);     // upper bounds too
 }
 
 }  // namespace

@@ -218,10 +218,11 @@ TEST(Windows, ParsesSecondsAndRejectsTheRest) {
 
 TEST(Windows, PercentagesAreFractionsOfTheDataSpan) {
   const std::vector<double> t{10.0, 11.0, 12.0, 13.0, 14.0};  // data end 15 s: the span is [10, 15)
-  EXPECT_EQ(parse_window("0:40%", t), (TimeWindow{0.0, 12.0}));
+  EXPECT_EQ(parse_window("0:40%", t), (TimeWindow{10.0, 12.0}));  // one "%" makes both ends percentages
   EXPECT_EQ(parse_window("0%:40%", t), (TimeWindow{10.0, 12.0}));
   EXPECT_EQ(parse_window("40%:", t), (TimeWindow{12.0, std::numeric_limits<double>::infinity()}));
   EXPECT_EQ(parse_window("20%:100%", t), (TimeWindow{11.0, 15.0}));
+  EXPECT_EQ(parse_window("20:60%", TimeWindow{100.0, 200.0}), (TimeWindow{120.0, 160.0}));  // of any span
   for (const char* bad : {"50%:40%", "-1%:20%", "0:101%", "%:10", "10%%:20%"})
     EXPECT_THROW(parse_window(bad, t), std::invalid_argument) << bad;
   EXPECT_THROW(parse_window("0:40%"), std::invalid_argument);  // a percentage without the data

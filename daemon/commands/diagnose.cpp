@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "daemon/daemon.hpp"
 #include "diagnose/report.hpp"
@@ -33,6 +34,7 @@ struct DiagnoseCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  bool in_flight = false;
   std::string axis = "both", model = "paper";
   std::optional<std::string> velocity, train, validate;
   std::vector<std::string> ignore_bands, limits;
@@ -155,8 +157,9 @@ int run(const DiagnoseCliOptions& o) {
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference,
                                                        .imu_axes = o.imu_axes});
   options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
-  if (o.train) options.train = est::parse_window(*o.train, session.series.t);
-  if (o.validate) options.validate = est::parse_window(*o.validate, session.series.t);
+  const est::TimeWindow span = percent_span(session.series, o.in_flight);
+  if (o.train) options.train = est::parse_window(*o.train, span);
+  if (o.validate) options.validate = est::parse_window(*o.validate, span);
   dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
   diagnosis.imu_axes = session.axes.description;
   diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
@@ -197,6 +200,8 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--train", o->train,
                   "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
                   "(default 0:33)");
+  cmd->add_flag("--in-flight", o->in_flight,
+               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
   cmd->add_option("--validate", o->validate,
                   "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/session_windows.hpp"
 #include "daemon/daemon.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/velocity_scores.hpp"
@@ -27,6 +28,7 @@ struct EvaluateCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  bool in_flight = false;
   std::optional<std::string> window, baseline_train;
 };
 
@@ -42,8 +44,9 @@ int run(const EvaluateCliOptions& o) {
                                                        .reference = pipeline::ReferenceUse::required,
                                                        .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  const est::TimeWindow span = percent_span(session.series, o.in_flight);
   const std::optional<est::TimeWindow> window =
-      o.window ? std::optional(est::parse_window(*o.window, session.series.t)) : std::nullopt;
+      o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
   const est::VelocityEvaluation e =
       est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
   const est::DragVelocityCounters& c = e.counters;
@@ -71,7 +74,7 @@ int run(const EvaluateCliOptions& o) {
   json report = out;
   if (o.baseline_train) {
     // Trained on its own window, scored on the evaluation window: the same data the model is judged on.
-    const est::TimeWindow train = est::parse_window(*o.baseline_train, session.series.t);
+    const est::TimeWindow train = est::parse_window(*o.baseline_train, span);
     const est::LinearDragBaseline b = est::linear_drag_baseline(session.series, {train, e.window});
     report["rmse_m_s"]["linear_least_squares"] = to_json(b.scores.validation);
     report["linear_least_squares"] = {{"train_window", {train.start, train.end}},
@@ -96,6 +99,8 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--baseline-train", o->baseline_train,
                   "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
                   "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
+  cmd->add_flag("--in-flight", o->in_flight,
+               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
   cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
   return [o] { return run(*o); };
 });

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "daemon/daemon.hpp"
 #include "estimator/plausibility.hpp"
@@ -36,6 +37,7 @@ struct IdentifyCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  bool in_flight = false;
   std::string model = "paper", method = "lm", velocity = "eq12";
   std::optional<std::string> train, validate;
   std::vector<std::string> hold, limits;
@@ -175,8 +177,9 @@ int run(const IdentifyCliOptions& o) {
                                                                         : pipeline::ReferenceUse::when_present,
        .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  if (o.train) options.train = est::parse_window(*o.train, session.series.t);
-  if (o.validate) options.validate = est::parse_window(*o.validate, session.series.t);
+  const est::TimeWindow span = percent_span(session.series, o.in_flight);
+  if (o.train) options.train = est::parse_window(*o.train, span);
+  if (o.validate) options.validate = est::parse_window(*o.validate, span);
   const est::IdentifyResult result = est::identify(session.series, options);
 
   daemon::save_params(o.out, result.params);
@@ -216,6 +219,8 @@ const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--train", o->train,
                   "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
                   "(default 0:33)");
+  cmd->add_flag("--in-flight", o->in_flight,
+               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
   cmd->add_option("--validate", o->validate,
                   "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
   cmd->add_option("--limit", o->limits,
