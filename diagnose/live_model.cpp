@@ -25,10 +25,8 @@ double yaw_of(const Eigen::Quaterniond& q) {
 
 }  // namespace
 
-estimator::ModelParams live_params(const Model& model, std::span<const double> p, std::span<const double> std_errors,
-                                   Range train, Range validation) {
+estimator::ModelParams live_params(const Model& model, std::span<const double> p, std::span<const double> std_errors) {
   const ModelSetup& setup = model.setup();
-  const Signals& signals = model.signals();
   const std::vector<Parameter>& parameters = model.parameters();
   estimator::ModelParams out;
   estimator::FullModelParams& full = out.full;
@@ -55,7 +53,6 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
   const Eigen::Matrix3d imu_to_body =
       setup.base == BaseModel::kFull ? rotation_matrix(full.mounting) : Eigen::Matrix3d::Identity();
 
-  const ModelInputs inputs = model.inputs(p);
   for (std::size_t e = 0; e < model.effects().size(); ++e) {
     const std::string name(model.effects()[e]->name());
     out.effects.push_back(name);
@@ -95,10 +92,23 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
       }
     }
     if (name == "accel_bias") full.accel_bias += imu_to_body.transpose() * body_bias;
-    if (name == "wind" && !inputs.attitude.empty()) full.wind_heading = yaw_of(inputs.attitude.front());
+    if (name == "wind") {  // the world the wind was fitted in: the model's attitude at the first sample
+      const ModelInputs inputs = model.inputs(p);
+      if (!inputs.attitude.empty()) full.wind_heading = yaw_of(inputs.attitude.front());
+    }
   }
 
-  estimator::Identification& id = out.identification;
+  for (std::size_t i = 0; i < paths.size() && i < std_errors.size(); ++i) {
+    if (!paths[i].empty() && std::isfinite(std_errors[i])) out.identification.std_errors[paths[i]] = std_errors[i];
+  }
+  return out;
+}
+
+void record_fit(estimator::ModelParams& params, const Model& model, std::span<const double> p, Range train,
+                Range validation) {
+  const ModelSetup& setup = model.setup();
+  const Signals& signals = model.signals();
+  estimator::Identification& id = params.identification;
   id.method = "diagnose";
   const auto window = [&](Range r) {
     const double end = r.first + r.count < signals.size() ? signals.t[r.first + r.count]
@@ -107,9 +117,6 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
   };
   id.fit_windows = {window(train)};
   id.validation_windows = {window(validation)};
-  for (std::size_t i = 0; i < paths.size() && i < std_errors.size(); ++i) {
-    if (!paths[i].empty() && std::isfinite(std_errors[i])) id.std_errors[paths[i]] = std_errors[i];
-  }
   // The live filter sees the whole band, so its noise comes from the residual without the band limit.
   ModelSetup whole_band = setup;
   whole_band.lowpass_hz = 0.0;
@@ -124,7 +131,6 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
           std::sqrt(sum / static_cast<double>(std::max<std::size_t>(residual[i].size(), 1)));
     }
   }
-  return out;
 }
 
 }  // namespace imubridge::diagnose

@@ -11,11 +11,14 @@
 
 namespace imubridge::diagnose {
 
-// The parameters of `model` at `values` (standard errors, when given, go into identification.std_errors under the
-// same path as the value they belong to). The identification block records the windows, and per diagnosed axis the
-// residual RMS over the whole band (the filter's measurement noise follows it: estimator::config_for), keyed
-// "<full|paper>.<axis>.<fit|validation>".
+// The parameters of `model` at `values`; standard errors, when given, go into identification.std_errors under the
+// same path as the value they belong to.
 estimator::ModelParams live_params(const Model& model, std::span<const double> values,
-                                   std::span<const double> std_errors, Range train, Range validation);
+                                   std::span<const double> std_errors = {});
+
+// The identification block of a fit: method, windows, and per diagnosed axis the residual RMS over the whole band
+// (the filter's measurement noise follows it: estimator::config_for), keyed "<full|paper>.<axis>.<fit|validation>".
+void record_fit(estimator::ModelParams& params, const Model& model, std::span<const double> values, Range train,
+                Range validation);
 
 }  // namespace imubridge::diagnose

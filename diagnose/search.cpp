@@ -75,6 +75,7 @@ struct State {
   ModelFit summary;
   AxisValues train_residual, validation_residual;
   std::vector<std::string> implausible_limits;  // the plausibility limits this model already exceeds
+  estimator::ModelParams params;                 // the model as the live estimator runs it
 };
 
 std::vector<std::string> names_of(const std::vector<const Effect*>& effects) {
@@ -245,14 +246,12 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
 
   const Model base_model(signals, setup);
   State current = settle(base_model, fit(base_model, base_model.base_start(train), train), train, validation);
-  // The model as the live estimator would run it, with what it does for the velocity and whether it is plausible.
-  const auto live = [&](const Model& model, const FitOutcome& fit) {
-    return live_params(model, fit.values, fit.std_errors, train, validation);
-  };
+  // The model as the live estimator will run it, what it does for the velocity, and whether it is plausible.
   const auto judge = [&](const Model& model, State& state) {
-    const estimator::ModelParams params = live(model, state.fit);
-    state.summary.velocity = estimator::score_velocity(series, params, windows);
-    for (const estimator::Implausibility& i : estimator::check_plausibility(params.full, options.limits)) {
+    state.params = live_params(model, state.fit.values, state.fit.std_errors);
+    record_fit(state.params, model, state.fit.values, train, validation);
+    state.summary.velocity = estimator::score_velocity(series, state.params, windows);
+    for (const estimator::Implausibility& i : estimator::check_plausibility(state.params.full, options.limits)) {
       state.summary.implausible.push_back(i.message);
       state.implausible_limits.push_back(i.limit);
     }
@@ -260,7 +259,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   judge(base_model, current);
   out.base = current.summary;
   if (series.reference)
-    out.zero_velocity = estimator::zero_velocity_scores(series, live(base_model, current.fit).full.mounting, windows);
+    out.zero_velocity = estimator::zero_velocity_scores(series, current.params.full.mounting, windows);
   out.base_residual = analyse(base_model, current, validation, options);
   const AxisValues base_validation_residual = current.validation_residual;
 
@@ -306,7 +305,8 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         // Refused for what it makes implausible; a limit the current model already exceeds (its base, say) is
         // flagged there and would otherwise block every step.
         std::vector<estimator::Implausibility> implausible;
-        for (estimator::Implausibility& i : estimator::check_plausibility(live(model, best).full, options.limits)) {
+        for (estimator::Implausibility& i :
+             estimator::check_plausibility(live_params(model, best.values).full, options.limits)) {
           if (std::find(current.implausible_limits.begin(), current.implausible_limits.end(), i.limit) ==
               current.implausible_limits.end())
             implausible.push_back(std::move(i));
@@ -391,10 +391,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   }
 
   out.final = current.summary;
-  {
-    const Model final_model(signals, setup, current.effects);
-    out.final_params = live(final_model, current.fit);
-  }
+  out.final_params = current.params;
   out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
   out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
                                    [](const ResidualAnalysis& a) { return a.white; });
