@@ -102,8 +102,22 @@ void BM_CausalDifferentiator(benchmark::State& state) {
 }
 BENCHMARK(BM_CausalDifferentiator)->Arg(5)->Arg(15);
 
+// The model a diagnosis can end with: every effect the live estimator runs switched on.
+FullModelParams params_with_every_live_effect() {
+  FullModelParams p = params();
+  p.accel_scale = {0.01, -0.02, 0.0};
+  p.accel_cross(0, 1) = 0.01;
+  p.accel_cross(1, 0) = -0.01;
+  p.gyro_bias = {0.01, -0.005, 0.002};
+  p.time_offset = 0.02;
+  p.wind = {2.0, -1.0};
+  p.wind_heading = 0.3;
+  return p;
+}
+
+// Arg 0: the rigid body and drag; arg 1: every live effect as well.
 void BM_DragVelocityEstimatorUpdate(benchmark::State& state) {
-  DragVelocityEstimator estimator(params(), DragVelocityConfig{});
+  DragVelocityEstimator estimator(state.range(0) ? params_with_every_live_effect() : params(), DragVelocityConfig{});
   auto data = samples();
   std::size_t k = 0;
   for (auto _ : state) {
@@ -113,7 +127,7 @@ void BM_DragVelocityEstimatorUpdate(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations());
 }
-BENCHMARK(BM_DragVelocityEstimatorUpdate);
+BENCHMARK(BM_DragVelocityEstimatorUpdate)->Arg(0)->Arg(1);
 
 }  // namespace
 }  // namespace imubridge::estimator
