@@ -34,9 +34,9 @@ struct DiagnoseCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
-  bool in_flight = false;
   std::string axis = "both", model = "paper";
-  std::optional<std::string> velocity, train, validate;
+  std::optional<std::string> velocity;
+  WindowArgs windows;
   std::vector<std::string> ignore_bands, limits;
   std::optional<std::string> out;
   int max_steps = 8;
@@ -139,7 +139,7 @@ int run(const DiagnoseCliOptions& o) {
   options.model = parse_model(o.model);
   options.axes = parse_axes(o.axis);
   if (o.velocity) options.velocity = parse_velocity(*o.velocity);
-  for (const std::string& limit : o.limits) est::override_limit(options.limits, limit);
+  options.limits = plausibility_limits(o.limits);
   for (const std::string& band : o.ignore_bands) options.ignore_bands.push_back(parse_band(band));
   if (o.max_steps < 0) throw std::invalid_argument("--max-steps must be 0 or more");
   options.max_steps = o.max_steps;
@@ -157,9 +157,7 @@ int run(const DiagnoseCliOptions& o) {
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference,
                                                        .imu_axes = o.imu_axes});
   options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
-  const est::TimeWindow span = percent_span(session.series, o.in_flight);
-  if (o.train) options.train = est::parse_window(*o.train, span);
-  if (o.validate) options.validate = est::parse_window(*o.validate, span);
+  std::tie(options.train, options.validate) = o.windows.resolve(session.series);
   dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
   diagnosis.imu_axes = session.axes.description;
   diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
@@ -197,13 +195,7 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
       ->capture_default_str();
   cmd->add_option("--velocity", o->velocity,
                   "reference | imu (integrated from the gyro, eq. 12); default: reference when the session has one");
-  cmd->add_option("--train", o->train,
-                  "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
-                  "(default 0:33)");
-  cmd->add_flag("--in-flight", o->in_flight,
-               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
-  cmd->add_option("--validate", o->validate,
-                  "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
+  add_window_options(*cmd, o->windows);
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
   cmd->add_option("--lowpass", o->lowpass_hz,
@@ -214,10 +206,7 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--out", o->out,
                   "Write the final model (base plus every effect added, with standard errors) as PARAMS.json for "
                   "run, replay and evaluate");
-  cmd->add_option("--limit", o->limits,
-                  "Override a plausibility limit, NAME=VALUE (repeatable): lever_arm (m), wind (m/s), accel_scale, "
-                  "accel_cross, gyro_bias (rad/s), accel_bias (m/s^2), time_offset (s); a candidate beyond one is "
-                  "refused");
+  add_limit_option(*cmd, o->limits);
   return [o] { return run(*o); };
 });
 

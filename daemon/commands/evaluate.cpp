@@ -99,8 +99,7 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--baseline-train", o->baseline_train,
                   "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
                   "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
-  cmd->add_flag("--in-flight", o->in_flight,
-               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
+  add_in_flight_flag(*cmd, o->in_flight);
   cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
   return [o] { return run(*o); };
 });

@@ -37,9 +37,8 @@ struct IdentifyCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
-  bool in_flight = false;
   std::string model = "paper", method = "lm", velocity = "eq12";
-  std::optional<std::string> train, validate;
+  WindowArgs windows;
   std::vector<std::string> hold, limits;
   est::GaOptions ga;
 };
@@ -162,8 +161,7 @@ int run(const IdentifyCliOptions& o) {
   options.method = est::parse_method(o.method);
   options.velocity = est::parse_velocity(o.velocity);
   options.ga = o.ga;
-  est::PlausibilityLimits limits;
-  for (const std::string& limit : o.limits) est::override_limit(limits, limit);
+  const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   options.hold = parse_hold(o.hold);
   if (!o.hold.empty() && options.model != est::ModelKind::kFull)
     throw std::invalid_argument("--hold applies to --model full only");
@@ -177,9 +175,7 @@ int run(const IdentifyCliOptions& o) {
                                                                         : pipeline::ReferenceUse::when_present,
        .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  const est::TimeWindow span = percent_span(session.series, o.in_flight);
-  if (o.train) options.train = est::parse_window(*o.train, span);
-  if (o.validate) options.validate = est::parse_window(*o.validate, span);
+  std::tie(options.train, options.validate) = o.windows.resolve(session.series);
   const est::IdentifyResult result = est::identify(session.series, options);
 
   daemon::save_params(o.out, result.params);
@@ -216,16 +212,8 @@ const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--model", o->model, "paper (eq. 14, pitch and roll axes) | full (the 3-D model)")
       ->capture_default_str();
   cmd->add_option("--method", o->method, "ga (the paper's) | lm (Levenberg-Marquardt) | ga+lm")->capture_default_str();
-  cmd->add_option("--train", o->train,
-                  "Fit window T0:T1 in seconds from the session start, or in percent of the session (0:40%) "
-                  "(default 0:33)");
-  cmd->add_flag("--in-flight", o->in_flight,
-               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
-  cmd->add_option("--validate", o->validate,
-                  "Validation window T0:T1, seconds or percent (40%:) (default: from the end of --train on)");
-  cmd->add_option("--limit", o->limits,
-                  "Override a plausibility limit, NAME=VALUE (repeatable): lever_arm (m), wind (m/s), accel_scale, "
-                  "accel_cross, gyro_bias (rad/s), accel_bias (m/s^2), time_offset (s)");
+  add_window_options(*cmd, o->windows);
+  add_limit_option(*cmd, o->limits);
   cmd->add_option("--velocity", o->velocity, "Velocity in the drag term: eq12 (from the gyro) | reference")
       ->capture_default_str();
   cmd->add_option("--hold", o->hold,
