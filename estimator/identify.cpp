@@ -219,15 +219,6 @@ FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w
   return report;
 }
 
-struct ErrorSum {
-  Eigen::Vector2d squares = Eigen::Vector2d::Zero();
-  void add(const Eigen::Vector2d& error) { squares += error.cwiseAbs2(); }
-  VelocityError rmse(std::size_t n) const {
-    const Eigen::Vector2d mean = squares / static_cast<double>(n);
-    return {mean.cwiseSqrt(), std::sqrt(mean.sum())};
-  }
-};
-
 }  // namespace
 
 std::string_view name(ModelKind model) { return spelling(model, kModels); }
@@ -362,16 +353,17 @@ IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
   return result;
 }
 
-VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
-                                     const std::optional<TimeWindow>& window, const DragVelocityConfig& config) {
+std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
+                                                  std::span<const TimeWindow> windows,
+                                                  const DragVelocityConfig& config) {
   require_valid(series);
   require_reference(series, "evaluating the velocity");
   if (series.size() == 0) throw std::invalid_argument("no samples to evaluate");
   DragVelocityEstimator estimator(params, config);
   if (!estimator.has_drag(0) || !estimator.has_drag(1))
     throw std::invalid_argument("evaluating the velocity needs drag identified on both horizontal axes");
-  VelocityEvaluation out;
-  out.window = clip(window.value_or(TimeWindow{series.t.front(), data_end(series.t)}), series.t, "evaluation");
+  std::vector<VelocityEvaluation> out(windows.size());
+  for (std::size_t w = 0; w < windows.size(); ++w) out[w].window = clip(windows[w], series.t, "evaluation");
 
   const LeverArmCompensator imu_to_body(params);  // for its mounting rotation
   // The estimator's velocity is in its body frame, the one the mounting defines (R_bs: IMU -> body); the reference's
@@ -382,27 +374,42 @@ VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelPar
   for (std::size_t k = 0; k < series.size(); ++k) gyro_body[k] = imu_to_body.to_body(series.gyro[k]);
   const std::vector<Eigen::Vector3d> open_loop = dead_reckoned_body_velocity(series.t, gyro_body);
 
-  ErrorSum filter, inversion, eq12, zero;
+  struct Sums {
+    VelocityErrorSum filter, inversion, eq12, zero;
+  };
+  std::vector<Sums> sums(windows.size());
   for (std::size_t k = 0; k < series.size(); ++k) {
     const std::optional<DragVelocityEstimate> e = estimator.update(series.sample(k));
-    if (!e || e->t < out.window.start || !(e->t < out.window.end)) continue;
+    if (!e) continue;
     // The estimate describes an earlier sample (the differentiator's delay): score it against that one.
     const auto i =
         static_cast<std::size_t>(std::lower_bound(series.t.begin(), series.t.end(), e->t) - series.t.begin());
     const Eigen::Vector2d v = truth[i].head<2>();
-    filter.add(e->v - v);
-    inversion.add(e->v_raw - v);
-    eq12.add(open_loop[i].head<2>() - v);
-    zero.add(-v);
-    ++out.samples;
+    for (std::size_t w = 0; w < windows.size(); ++w) {
+      if (e->t < out[w].window.start || !(e->t < out[w].window.end)) continue;
+      sums[w].filter.add(e->v - v);
+      sums[w].inversion.add(e->v_raw - v);
+      sums[w].eq12.add(open_loop[i].head<2>() - v);
+      sums[w].zero.add(-v);
+      ++out[w].samples;
+    }
   }
-  if (out.samples == 0) throw std::invalid_argument("no estimates inside the evaluation window");
-  out.estimator = filter.rmse(out.samples);
-  out.inversion = inversion.rmse(out.samples);
-  out.eq12 = eq12.rmse(out.samples);
-  out.zero = zero.rmse(out.samples);
-  out.counters = estimator.counters();
+  for (std::size_t w = 0; w < windows.size(); ++w) {
+    if (out[w].samples == 0) throw std::invalid_argument("no estimates inside the evaluation window");
+    out[w].estimator = sums[w].filter.rmse();
+    out[w].inversion = sums[w].inversion.rmse();
+    out[w].eq12 = sums[w].eq12.rmse();
+    out[w].zero = sums[w].zero.rmse();
+    out[w].counters = estimator.counters();
+  }
   return out;
+}
+
+VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
+                                     const std::optional<TimeWindow>& window, const DragVelocityConfig& config) {
+  if (series.size() == 0) throw std::invalid_argument("no samples to evaluate");
+  const TimeWindow w = window.value_or(TimeWindow{series.t.front(), data_end(series.t)});
+  return evaluate_velocity(series, params, std::span<const TimeWindow>(&w, 1), config).front();
 }
 
 }  // namespace imubridge::estimator

@@ -5,6 +5,7 @@
 // the drag-velocity estimator against a reference, which is how identified parameters are judged.
 #include <Eigen/Core>
 #include <algorithm>
+#include <cmath>
 #include <optional>
 #include <span>
 #include <string>
@@ -134,6 +135,17 @@ struct VelocityError {
   double horizontal = 0.0;
 };
 
+// Sums squared errors sample by sample into a VelocityError.
+struct VelocityErrorSum {
+  Eigen::Vector2d squares = Eigen::Vector2d::Zero();
+  std::size_t count = 0;
+  void add(const Eigen::Vector2d& error) { squares += error.cwiseAbs2(), ++count; }
+  VelocityError rmse() const {
+    const Eigen::Vector2d mean = squares / static_cast<double>(std::max<std::size_t>(count, 1));
+    return {mean.cwiseSqrt(), std::sqrt(mean.sum())};
+  }
+};
+
 struct VelocityEvaluation {
   TimeWindow window;
   std::size_t samples = 0;  // samples scored: in the window and with an estimate
@@ -152,5 +164,9 @@ struct VelocityEvaluation {
 VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
                                      const std::optional<TimeWindow>& window = std::nullopt,
                                      const DragVelocityConfig& config = {});
+// The same for several windows from one run of the estimator, in their order.
+std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
+                                                  std::span<const TimeWindow> windows,
+                                                  const DragVelocityConfig& config = {});
 
 }  // namespace imubridge::estimator

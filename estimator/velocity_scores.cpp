@@ -3,44 +3,49 @@
 #include <cmath>
 #include <stdexcept>
 
-#include <Eigen/Geometry>
+#include "estimator/lever_arm_compensation.hpp"
+#include "estimator/velocity.hpp"
 
 namespace imubridge::estimator {
 namespace {
 
-VelocityError zero_error(const ImuSeries& series, const Eigen::Matrix3d& imu_to_body, const TimeWindow& w) {
-  double sx = 0.0, sy = 0.0;
-  std::size_t n = 0;
-  for (std::size_t k = 0; k < series.size(); ++k) {
-    if (series.t[k] < w.start || !(series.t[k] < w.end)) continue;
-    const Eigen::Vector3d v =
-        imu_to_body * (series.reference->attitude[k].conjugate() * series.reference->velocity_ned[k]);
-    sx += v.x() * v.x(), sy += v.y() * v.y(), ++n;
+bool inside(double t, const TimeWindow& w) { return t >= w.start && t < w.end; }
+
+// The reference's velocity in body axes (the series' axes, turned by `to_body` where given).
+std::vector<Eigen::Vector3d> truth(const ImuSeries& series, const LeverArmCompensator* to_body = nullptr) {
+  std::vector<Eigen::Vector3d> v = body_velocity(series.reference->attitude, series.reference->velocity_ned);
+  if (to_body != nullptr) {
+    for (Eigen::Vector3d& x : v) x = to_body->to_body(x);
   }
-  const double count = static_cast<double>(std::max<std::size_t>(n, 1));
-  VelocityError out;
-  out.axis = {std::sqrt(sx / count), std::sqrt(sy / count)};
-  out.horizontal = std::sqrt((sx + sy) / count);
-  return out;
+  return v;
+}
+
+VelocityError zero_error(const ImuSeries& series, const std::vector<Eigen::Vector3d>& v, const TimeWindow& w) {
+  VelocityErrorSum sum;
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    if (inside(series.t[k], w)) sum.add(v[k].head<2>());
+  }
+  return sum.rmse();
 }
 
 }  // namespace
 
 VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector3d& mounting, const Windows& windows) {
   if (!series.reference) throw std::invalid_argument("zero velocity's error needs a reference");
-  const double angle = mounting.norm();
-  const Eigen::Matrix3d imu_to_body = angle == 0.0 ? Eigen::Matrix3d::Identity()
-                                                   : Eigen::AngleAxisd(angle, mounting / angle).toRotationMatrix();
-  return {zero_error(series, imu_to_body, windows.train), zero_error(series, imu_to_body, windows.validate), ""};
+  FullModelParams rotation_only;  // the compensator holds R_bs, the estimator's own frame
+  rotation_only.mounting = mounting;
+  const LeverArmCompensator to_body(rotation_only);
+  const std::vector<Eigen::Vector3d> v = truth(series, &to_body);
+  return {zero_error(series, v, windows.train), zero_error(series, v, windows.validate), ""};
 }
 
 std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
                                              const Windows& windows) {
   if (!series.reference) return std::nullopt;
   try {
-    const DragVelocityConfig config = config_for(params);
-    return VelocityScores{evaluate_velocity(series, params.full, windows.train, config).estimator,
-                          evaluate_velocity(series, params.full, windows.validate, config).estimator, ""};
+    const TimeWindow both[] = {windows.train, windows.validate};
+    const std::vector<VelocityEvaluation> e = evaluate_velocity(series, params.full, both, config_for(params));
+    return VelocityScores{e[0].estimator, e[1].estimator, ""};
   } catch (const std::invalid_argument& e) {
     VelocityScores zero = zero_velocity_scores(series, params.full.mounting, windows);
     zero.note = std::string("no velocity from this model (") + e.what() + "); scored as zero velocity";
@@ -50,17 +55,14 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
 
 LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& windows) {
   if (!series.reference) throw std::invalid_argument("the linear least-squares baseline needs a reference");
-  const auto body_velocity = [&](std::size_t k) {
-    return Eigen::Vector3d(series.reference->attitude[k].conjugate() * series.reference->velocity_ned[k]);
-  };
-  const auto inside = [&](std::size_t k, const TimeWindow& w) { return series.t[k] >= w.start && series.t[k] < w.end; };
+  const std::vector<Eigen::Vector3d> v_body = truth(series);
   LinearDragBaseline out;
   for (int axis = 0; axis < 2; ++axis) {
     // a = c0 + c1 v: the normal equations of a straight line.
     double n = 0.0, sv = 0.0, sa = 0.0, svv = 0.0, sva = 0.0;
     for (std::size_t k = 0; k < series.size(); ++k) {
-      if (!inside(k, windows.train)) continue;
-      const double v = body_velocity(k)[axis], a = series.accel[k][axis];
+      if (!inside(series.t[k], windows.train)) continue;
+      const double v = v_body[k][axis], a = series.accel[k][axis];
       n += 1.0, sv += v, sa += a, svv += v * v, sva += v * a;
     }
     const double det = n * svv - sv * sv;
@@ -71,19 +73,13 @@ LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& 
     out.b[axis] = (sa - slope * sv) / n;
   }
   const auto score = [&](const TimeWindow& w) {
-    double sx = 0.0, sy = 0.0, count = 0.0;
+    VelocityErrorSum sum;
     for (std::size_t k = 0; k < series.size(); ++k) {
-      if (!inside(k, w)) continue;
-      const Eigen::Vector3d truth = body_velocity(k);
-      const double ex = (out.b.x() - series.accel[k].x()) / out.k.x() - truth.x();
-      const double ey = (out.b.y() - series.accel[k].y()) / out.k.y() - truth.y();
-      sx += ex * ex, sy += ey * ey, count += 1.0;
+      if (!inside(series.t[k], w)) continue;
+      const Eigen::Vector2d v = (out.b - series.accel[k].head<2>()).cwiseQuotient(out.k);
+      sum.add(v - v_body[k].head<2>());
     }
-    count = std::max(count, 1.0);
-    VelocityError e;
-    e.axis = {std::sqrt(sx / count), std::sqrt(sy / count)};
-    e.horizontal = std::sqrt((sx + sy) / count);
-    return e;
+    return sum.rmse();
   };
   out.scores = {score(windows.train), score(windows.validate), ""};
   return out;
