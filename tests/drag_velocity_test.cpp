@@ -284,10 +284,10 @@ TEST(DragVelocityEstimator, CompensatedForceIsTheDrag) {
   EXPECT_NEAR(rms, flight_config().accel_noise, 0.1 * flight_config().accel_noise);
 }
 
-TEST(DragVelocityEstimator, IsBitIdenticalForTheSameInput) {
-  const Flight flight = fly(5.0, 13);
-  DragVelocityEstimator a(flight_params(), flight_config());
-  DragVelocityEstimator b(flight_params(), flight_config());
+// Two estimators with the same parameters over the same samples give the same estimates, bit for bit.
+void expect_bit_identical(const FullModelParams& params, const Flight& flight) {
+  DragVelocityEstimator a(params, flight_config());
+  DragVelocityEstimator b(params, flight_config());
   const Estimates ra = run(a, flight.samples);
   const Estimates rb = run(b, flight.samples);
   ASSERT_EQ(ra.estimates.size(), rb.estimates.size());
@@ -297,6 +297,8 @@ TEST(DragVelocityEstimator, IsBitIdenticalForTheSameInput) {
     EXPECT_EQ(ra.estimates[i].f, rb.estimates[i].f);
   }
 }
+
+TEST(DragVelocityEstimator, IsBitIdenticalForTheSameInput) { expect_bit_identical(flight_params(), fly(5.0, 13)); }
 
 TEST(DragVelocityEstimator, RejectedSamplesAreCountedAndChangeNothing) {
   const Flight flight = fly(3.0, 14);
@@ -520,16 +522,7 @@ TEST(DragVelocityEffects, EveryEffectTogetherIsBitIdenticalForTheSameInput) {
   truth.params.accel_cross(0, 2) = 0.02;
   truth.params.time_offset = 0.02;
   truth.params.wind = {2.0, -1.0};
-  const Flight flight = fly(5.0, 22, truth);
-  DragVelocityEstimator a(truth.params, flight_config());
-  DragVelocityEstimator b(truth.params, flight_config());
-  const Estimates ra = run(a, flight.samples);
-  const Estimates rb = run(b, flight.samples);
-  ASSERT_EQ(ra.estimates.size(), rb.estimates.size());
-  for (std::size_t i = 0; i < ra.estimates.size(); ++i) {
-    EXPECT_EQ(ra.estimates[i].v, rb.estimates[i].v);
-    EXPECT_EQ(ra.estimates[i].v_var, rb.estimates[i].v_var);
-  }
+  expect_bit_identical(truth.params, fly(5.0, 22, truth));
 }
 
 TEST(DragVelocityEffects, RefusesParametersOutsideTheirRange) {
