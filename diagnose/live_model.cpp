@@ -92,7 +92,9 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
       }
     }
     if (name == "accel_bias") full.accel_bias += imu_to_body.transpose() * body_bias;
-    if (name == "wind") {  // the world the wind was fitted in: the model's attitude at the first sample
+    // The world the wind was fitted in: the model's attitude at the first sample. The filter's heading starts at 0
+    // there, which is the default.
+    if (name == "wind" && setup.velocity != VelocitySource::kFilter) {
       const ModelInputs inputs = model.inputs(p);
       if (!inputs.attitude.empty()) full.wind_heading = yaw_of(inputs.attitude.front());
     }

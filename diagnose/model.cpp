@@ -1,5 +1,6 @@
 #include "diagnose/model.hpp"
 
+#include "diagnose/live_model.hpp"
 #include "diagnose/lowpass.hpp"
 
 #include <ceres/ceres.h>
@@ -154,6 +155,10 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
   input_parameter_.assign(parameters_.size(), false);
   const bool drag_in_dynamics =
       std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->drag_in_dynamics(); });
+  if (filter_runs()) {
+    // The filter runs the whole model: every parameter moves its velocity.
+    input_parameter_.assign(parameters_.size(), true);
+  }
   if (setup_.base == BaseModel::kFull && setup_.velocity == VelocitySource::kImu) {
     for (std::size_t i = 3; i < 6; ++i) input_parameter_[i] = true;
   }
@@ -166,25 +171,26 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
     }
   }
   if (std::none_of(input_parameter_.begin(), input_parameter_.end(), [](bool b) { return b; }))
-    fixed_inputs_ = compute_inputs(std::vector<double>(parameters_.size(), 0.0));
+    fixed_inputs_ = compute_inputs(std::vector<double>(parameters_.size(), 0.0), signals.size());
 }
 
-const ModelInputs& Model::inputs_for(std::span<const double> p) const {
+const ModelInputs& Model::inputs_for(std::span<const double> p, std::size_t until) const {
   if (fixed_inputs_) return *fixed_inputs_;
   std::vector<double> key;
   for (std::size_t i = 0; i < p.size(); ++i) {
     if (input_parameter_[i]) key.push_back(p[i]);
   }
-  if (!cached_inputs_ || key != cached_key_) {
-    cached_inputs_ = compute_inputs(p);
+  if (!cached_inputs_ || key != cached_key_ || cached_until_ < until) {
+    cached_inputs_ = compute_inputs(p, until);
     cached_key_ = std::move(key);
+    cached_until_ = until;
   }
   return *cached_inputs_;
 }
 
-ModelInputs Model::inputs(std::span<const double> p) const { return inputs_for(p); }
+ModelInputs Model::inputs(std::span<const double> p) const { return inputs_for(p, signals().size()); }
 
-ModelInputs Model::compute_inputs(std::span<const double> p) const {
+ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) const {
   const Signals& s = signals();
   const std::span<const double> t = s.t;
   const std::size_t n = s.size();
@@ -219,6 +225,11 @@ ModelInputs Model::compute_inputs(std::span<const double> p) const {
   }
   in.thrust = measured_thrust ? s.thrust : std::vector<double>(n, kGravity);
 
+  if (setup_.velocity == VelocitySource::kFilter) {
+    // Without drag the filter has nothing to fuse, and nothing in the model reads a velocity.
+    in.velocity = filter_runs() ? filter_velocity(p, until) : std::vector<Vector3d>(n, Vector3d::Zero());
+    return in;  // already the air velocity, in the filter's body axes
+  }
   if (setup_.velocity == VelocitySource::kReference) {
     in.velocity = s.reference->velocity_body;
     in.attitude = s.reference->attitude;
@@ -262,10 +273,48 @@ ModelInputs Model::compute_inputs(std::span<const double> p) const {
   return in;
 }
 
+bool Model::filter_runs() const {
+  return setup_.velocity == VelocitySource::kFilter &&
+         (setup_.base == BaseModel::kPaper ||
+          std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->adds_drag(); }));
+}
+
+std::vector<Vector3d> Model::filter_velocity(std::span<const double> p, std::size_t until) const {
+  const Signals& s = signals();
+  // The model as the live estimator runs it (effects it cannot run, such as vibration, act after stage 3 only).
+  const estimator::FullModelParams params = live_params(*this, p).full;
+  estimator::DragVelocityEstimator filter(params, setup_.filter);
+  const std::size_t block = setup_.filter_block;
+  const std::size_t delay = static_cast<std::size_t>(filter.delay_samples());
+  // Block j's estimate comes delay_samples() blocks after it.
+  const std::size_t blocks = until == 0 ? 0 : std::min(s.size() / block, (until - 1) / block + 1 + delay);
+  const std::vector<estimator::ImuSample> means = block_means(s, block, blocks);
+  std::vector<Vector3d> velocity(s.size(), Vector3d::Zero());
+  // Every sample of block j takes the prediction for block j, made from the blocks before it; samples the filter
+  // holds no estimate for (the first blocks, those a time offset's aligner waits on) keep the last prediction.
+  std::size_t filled = 0;
+  const auto hold_until = [&](std::size_t end) {
+    for (; filled < end; ++filled) velocity[filled] = filled == 0 ? Vector3d::Zero() : velocity[filled - 1];
+  };
+  for (std::size_t j = 0; j < means.size(); ++j) {
+    const std::optional<estimator::DragVelocityEstimate> e = filter.update(means[j]);
+    if (!e || j < delay) continue;
+    const std::size_t first = (j - delay) * block;
+    hold_until(first);
+    Vector3d v(e->prior_air_velocity.x(), e->prior_air_velocity.y(), 0.0);
+    // A filter driven out of its range (a diverging candidate) gives no velocity: the fit sees a failed evaluation.
+    if (!v.allFinite()) v.setConstant(std::numeric_limits<double>::quiet_NaN());
+    for (std::size_t k = first; k < first + block; ++k) velocity[k] = v;
+    filled = first + block;
+  }
+  hold_until(std::min(until, s.size()));
+  return velocity;
+}
+
 Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   if (p.size() != parameters_.size()) throw std::invalid_argument("Model::evaluate: wrong number of parameters");
   if (range.first + range.count > signals().size()) throw std::invalid_argument("Model::evaluate: range too long");
-  const ModelInputs& in = inputs_for(p);
+  const ModelInputs& in = inputs_for(p, range.first + range.count);
   const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
   const std::size_t axes = setup_.axes.size();
 
@@ -306,7 +355,7 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
     ctx.imu_to_body = rotation(p.data() + 3);
     for (std::size_t k = 0; k < range.count; ++k) {
       const std::size_t j = range.first + k;
-      predicted[k] = estimator::predict_specific_force(full, {.gyro = in.gyro[j],
+      predicted[k] = estimator::predict_specific_force(full, ctx.imu_to_body, {.gyro = in.gyro[j],
                                                               .gyro_rate = in.gyro_rate[j],
                                                               .velocity = in.velocity[j].head<2>(),
                                                               .thrust = in.thrust[j]});
@@ -319,8 +368,11 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   // In the residual's frame: the paper model's sensor axes; the full model's body axes, where the thrust (unknown
   // per sample) only has a z component, so rows x and y.
   Evaluation e{AxisValues(axes, std::vector<double>(range.count)), AxisValues(axes, std::vector<double>(range.count))};
+  // The band limit: both sides alike, so the residual is the model's error inside the band. The filter is linear, so
+  // the measurement is low-passed once per range, in IMU axes, and rotated after.
+  const std::span<const Vector3d> compared = setup_.lowpass_hz > 0.0 ? lowpassed_measurement(range) : measured;
   for (std::size_t k = 0; k < range.count; ++k) {
-    const Vector3d m = setup_.base == BaseModel::kPaper ? measured[k] : Vector3d(ctx.imu_to_body * measured[k]);
+    const Vector3d m = setup_.base == BaseModel::kPaper ? compared[k] : Vector3d(ctx.imu_to_body * compared[k]);
     const Vector3d f = setup_.base == BaseModel::kPaper ? predicted[k] : Vector3d(ctx.imu_to_body * predicted[k]);
     for (std::size_t i = 0; i < axes; ++i) {
       e.measured[i][k] = m[setup_.axes[i]];
@@ -329,14 +381,25 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   }
   // 5. prediction
   for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_prediction(params_of(i), ctx, e.predicted);
-  // The band limit: both sides alike, so the residual is the model's error inside the band.
   if (setup_.lowpass_hz > 0.0) {
-    for (std::size_t i = 0; i < axes; ++i) {
-      zero_phase_lowpass(e.measured[i], setup_.lowpass_hz, signals().rate_hz);
-      zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, signals().rate_hz);
-    }
+    for (std::size_t i = 0; i < axes; ++i) zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, signals().rate_hz);
   }
   return e;
+}
+
+std::span<const Vector3d> Model::lowpassed_measurement(Range range) const {
+  for (const auto& [cached, values] : lowpassed_) {
+    if (cached.first == range.first && cached.count == range.count) return values;
+  }
+  std::vector<Vector3d> values(range.count);
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<double> x(range.count);
+    for (std::size_t k = 0; k < range.count; ++k) x[k] = signals().accel[range.first + k][axis];
+    zero_phase_lowpass(x, setup_.lowpass_hz, signals().rate_hz);
+    for (std::size_t k = 0; k < range.count; ++k) values[k][axis] = x[k];
+  }
+  lowpassed_.emplace_back(range, std::move(values));
+  return lowpassed_.back().second;
 }
 
 void Model::residuals(std::span<const double> p, Range range, double* out) const {
@@ -363,6 +426,12 @@ std::vector<double> Model::base_start(Range range) const {
     for (int i = 0; i < 3; ++i) p[3 + i] = signals().level_mounting[i];
     return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
   }
+  if (setup_.velocity == VelocitySource::kFilter) {
+    // The filter's velocity needs a drag to fuse: the paper's mu, from its decades, before the linear fit.
+    std::vector<std::size_t> mu;
+    for (std::size_t i = 0; i < setup_.axes.size(); ++i) mu.push_back(kPaperParams * i + 3);
+    scan_drag_start(p, mu, range);
+  }
   // Eq. (14) is linear in its four combinations: their least-squares fit is the optimum of the base alone.
   const ModelInputs in = inputs(p);
   for (std::size_t i = 0; i < setup_.axes.size(); ++i) {
@@ -378,8 +447,11 @@ std::vector<double> Model::base_start(Range range) const {
                     .f = signals().accel[j][axis]};
     }
     estimator::PaperAxisParams start;
+    start.mu = p[kPaperParams * i + 3];
     try {
       start = estimator::paper_linear_fit(samples);
+      // The filter fuses nothing without drag: keep the scanned one when the linear fit finds none.
+      if (setup_.velocity == VelocitySource::kFilter && !(start.mu > 0.0)) start.mu = p[kPaperParams * i + 3];
     } catch (const std::invalid_argument&) {
       // Data that do not determine all four terms (no motion): LM starts from the precise installation.
     }
@@ -391,6 +463,17 @@ std::vector<double> Model::base_start(Range range) const {
   return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
 }
 
+void Model::scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range) const {
+  double best_rmse = std::numeric_limits<double>::infinity(), best = p.empty() ? 0.0 : p[indices.front()];
+  std::vector<double> trial = p;
+  for (double value : kDragStarts) {
+    for (std::size_t i : indices) trial[i] = std::clamp(value, parameters_[i].lower, parameters_[i].upper);
+    const double r = rmse(trial, range);
+    if (r < best_rmse) best_rmse = r, best = value;
+  }
+  for (std::size_t i : indices) p[i] = std::clamp(best, parameters_[i].lower, parameters_[i].upper);
+}
+
 namespace {
 
 struct ModelCost {
@@ -398,7 +481,9 @@ struct ModelCost {
   Range range;
   bool operator()(double const* const* parameters, double* residuals) const {
     model->residuals({parameters[0], model->parameters().size()}, range, residuals);
-    return true;
+    // A non-finite residual (a filter that diverged at these values) fails the evaluation: LM shortens its step.
+    return std::all_of(residuals, residuals + range.count * model->setup().axes.size(),
+                       [](double r) { return std::isfinite(r); });
   }
 };
 
@@ -428,9 +513,21 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range) {
   out.values = std::move(start);
   double* x = out.values.data();
   ceres::Problem problem;
-  auto* cost = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::CENTRAL>(new ModelCost{&model, range});
-  cost->AddParameterBlock(static_cast<int>(params.size()));
-  cost->SetNumResiduals(static_cast<int>(residual_count));
+  // Central differences, except where every evaluation runs the filter over the flight: forward ones there halve
+  // the cost, and the filter's output is smooth in the parameters, so their first-order error stays far below the
+  // step LM takes.
+  ceres::CostFunction* cost = nullptr;
+  if (model.filter_runs()) {
+    auto* forward = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::FORWARD>(new ModelCost{&model, range});
+    forward->AddParameterBlock(static_cast<int>(params.size()));
+    forward->SetNumResiduals(static_cast<int>(residual_count));
+    cost = forward;
+  } else {
+    auto* central = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::CENTRAL>(new ModelCost{&model, range});
+    central->AddParameterBlock(static_cast<int>(params.size()));
+    central->SetNumResiduals(static_cast<int>(residual_count));
+    cost = central;
+  }
   problem.AddResidualBlock(cost, nullptr, x);
   for (std::size_t i = 0; i < params.size(); ++i) {
     if (std::isfinite(params[i].lower)) problem.SetParameterLowerBound(x, static_cast<int>(i), params[i].lower);

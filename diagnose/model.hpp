@@ -5,6 +5,7 @@
 // because effects such as a gyro bias or the self-consistent velocity change the velocity integrated over the whole
 // flight. Deterministic and single-threaded.
 #include <cstddef>
+#include <list>
 #include <optional>
 #include <span>
 #include <string>
@@ -39,6 +40,9 @@ class Model {
   // Every parameter: the base model's first, then each effect's in order.
   const std::vector<Parameter>& parameters() const { return parameters_; }
   std::size_t base_size() const { return base_size_; }
+  // True when the velocity comes from the filter and the model has a drag for it to fuse (else it has nothing to
+  // measure and no prediction reads a velocity): every evaluation then runs it.
+  bool filter_runs() const;
   // Where effect i's parameters start in the full vector, and how many it has.
   std::size_t effect_offset(std::size_t i) const { return offsets_[i]; }
   std::size_t effect_size(std::size_t i) const { return offsets_[i + 1] - offsets_[i]; }
@@ -56,11 +60,22 @@ class Model {
   // force (Signals::level_mounting).
   std::vector<double> base_start(Range range) const;
 
+  // From the IMU alone (kFilter) the drag sets the filter velocity's time constant, and a fit started far from the
+  // right one settles in a basin of its own: sets parameters `indices` of `p` (all drag coefficients) to the one of
+  // kDragStarts with the lowest RMSE on `range`, the others held. One filter run per value.
+  void scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range) const;
+  // Decades spanning multirotors' drag, linear (1/s) and quadratic (1/m) alike.
+  static constexpr double kDragStarts[] = {0.01, 0.03, 0.1, 0.3, 1.0, 3.0};
+
  private:
-  ModelInputs compute_inputs(std::span<const double> p) const;
+  // Stages 1-3 for samples [0, until) (kFilter runs its filter only that far; the other sources fill everything).
+  ModelInputs compute_inputs(std::span<const double> p, std::size_t until) const;
+  // kFilter: the drag-velocity filter run with the model at p over the whole series, its one-step-ahead air velocity
+  // per sample (so that the residual is the filter's innovation).
+  std::vector<Eigen::Vector3d> filter_velocity(std::span<const double> p, std::size_t until) const;
   // The inputs for p, recomputed only when a parameter they depend on changed: most of a numeric Jacobian's
   // evaluations perturb parameters that act after stage 3. Not thread-safe (the fit is single-threaded).
-  const ModelInputs& inputs_for(std::span<const double> p) const;
+  const ModelInputs& inputs_for(std::span<const double> p, std::size_t until) const;
 
   ModelSetup setup_;
   std::vector<const Effect*> effects_;
@@ -71,6 +86,11 @@ class Model {
   std::vector<bool> input_parameter_;        // which parameters stages 1-3 depend on
   mutable std::vector<double> cached_key_;   // their values for cached_inputs_
   mutable std::optional<ModelInputs> cached_inputs_;
+  mutable std::size_t cached_until_ = 0;  // cached_inputs_ hold samples [0, cached_until_)
+  // The measured specific force low-passed (IMU axes), per range evaluated: it does not depend on the parameters.
+  // Not thread-safe either.
+  std::span<const Eigen::Vector3d> lowpassed_measurement(Range range) const;
+  mutable std::list<std::pair<Range, std::vector<Eigen::Vector3d>>> lowpassed_;  // a list: spans into it stay valid
 };
 
 struct FitOutcome {

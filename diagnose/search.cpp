@@ -1,6 +1,10 @@
 #include "diagnose/search.hpp"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <thread>
+#include <tuple>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <cstdio>
@@ -10,6 +14,7 @@
 
 #include "diagnose/effects/library.hpp"
 #include "diagnose/live_model.hpp"
+#include "diagnose/lowpass.hpp"
 #include "diagnose/model.hpp"
 #include "diagnose/residual_analysis.hpp"
 #include "diagnose/signals.hpp"
@@ -210,6 +215,45 @@ double effective_samples(std::span<const double> x, std::size_t max_lag) {
   return std::clamp(n / (1.0 + 2.0 * sum), 1.0, n);
 }
 
+std::string_view name(VelocitySource velocity) {
+  switch (velocity) {
+    case VelocitySource::kReference: return "reference";
+    case VelocitySource::kImu: return "imu";
+    case VelocitySource::kFilter: return "filter";
+  }
+  return "?";
+}
+
+estimator::DragVelocityConfig filter_config(const Signals& signals, const DiagnoseOptions& options) {
+  estimator::DragVelocityConfig config;
+  const estimator::Windows windows = estimator::resolve_windows(signals.t, options.train, options.validate);
+  const Range train = range_of(signals, windows.train);
+  // What no rigid-body model of the flight explains from one block to the next: the levelled horizontal specific
+  // force of the filter's block means above the manoeuvres' band (noise, what vibration the blocks leave), over the
+  // training window.
+  const std::size_t block = identification_block(signals.rate_hz);
+  const std::size_t first = train.first / block, last = (train.first + train.count) / block;
+  if (last < first + 2) return config;
+  const std::vector<estimator::ImuSample> means = block_means(signals, block, last);
+  const Eigen::Matrix3d level = level_rotation(signals);
+  double sum = 0.0;
+  for (int axis = 0; axis < 2; ++axis) {
+    std::vector<double> f(last - first);
+    for (std::size_t j = first; j < last; ++j) f[j - first] = (level * means[j].accel)[axis];
+    std::vector<double> slow = f;
+    zero_phase_lowpass(slow, kManoeuvreBandHz, signals.rate_hz / static_cast<double>(block));
+    for (std::size_t k = 0; k < f.size(); ++k) sum += (f[k] - slow[k]) * (f[k] - slow[k]);
+  }
+  const double rms = std::sqrt(sum / static_cast<double>(2 * (last - first)));
+  if (std::isfinite(rms)) config.accel_noise = std::max(config.accel_noise, rms);
+  return config;
+}
+
+std::size_t fitting_threads(const DiagnoseOptions& options) {
+  if (options.threads > 0) return static_cast<std::size_t>(options.threads);
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
 Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
   DiagnoseOptions options = requested;
   if (options.lowpass_hz != 0.0) {
@@ -220,7 +264,11 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   const Signals signals = prepare_signals(series);
   ModelSetup setup;
   setup.base = options.model;
-  setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::kReference : VelocitySource::kImu);
+  setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::kReference : VelocitySource::kFilter);
+  if (setup.velocity == VelocitySource::kFilter) {
+    setup.filter = filter_config(signals, options);
+    setup.filter_block = identification_block(signals.rate_hz);
+  }
   setup.axes = options.axes;
   setup.signals = &signals;
   setup.ignore_bands = options.ignore_bands;
@@ -239,11 +287,19 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   out.session = options.session;
   out.model = options.model == BaseModel::kPaper ? "paper" : "full";
   for (int axis : setup.axes) out.axes.push_back(axis_name(axis));
-  out.velocity_source = setup.velocity == VelocitySource::kReference ? "reference" : "imu";
+  out.velocity_source = std::string(name(setup.velocity));
   out.train_start = windows.train.start, out.train_end = windows.train.end;
   out.validate_start = windows.validate.start, out.validate_end = windows.validate.end;
   out.significance_rule = describe_rule(options);
 
+  const auto started = std::chrono::steady_clock::now();
+  const auto report_progress = [&](int step, std::string_view candidate, bool finished, std::size_t done,
+                                   std::size_t total) {
+    if (!options.progress) return;
+    options.progress({step, std::string(candidate), finished, done, total,
+                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()});
+  };
+  report_progress(0, "base", false, 0, 1);
   const Model base_model(signals, setup);
   State current = settle(base_model, fit(base_model, base_model.base_start(train), train), train, validation);
   // The model as the live estimator will run it, what it does for the velocity, and whether it is plausible.
@@ -292,6 +348,11 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           trial.skipped = *why;
           return {trial, std::nullopt};
         }
+        if (setup.velocity == VelocitySource::kFilter && effect.adds_drag()) {
+          std::vector<std::size_t> drag(model.parameters().size() - offset);
+          for (std::size_t i = 0; i < drag.size(); ++i) drag[i] = offset + i;
+          model.scan_drag_start(start, drag, train);
+        }
         FitOutcome best = fit(model, start, train);
         for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(offset))) {
           std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(offset));
@@ -332,14 +393,28 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         return {trial, std::nullopt};
       }
     };
-    std::vector<CandidateTrial> trials;
-    std::vector<std::optional<State>> fitted;
+    std::vector<const Effect*> untried;
     for (const auto& effect : effect_library()) {
-      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) != current.effects.end()) continue;
-      auto [trial, candidate] = try_effect(*effect);
-      trials.push_back(std::move(trial));
-      fitted.push_back(std::move(candidate));
+      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) == current.effects.end())
+        untried.push_back(effect.get());
     }
+    // Candidates are independent: fitted on every core at once, kept in library order, so the outcome does not
+    // depend on which finishes first.
+    std::vector<CandidateTrial> trials(untried.size());
+    std::vector<std::optional<State>> fitted(untried.size());
+    std::atomic<std::size_t> next{0}, done{0};
+    const auto work = [&] {
+      for (std::size_t i = next++; i < untried.size(); i = next++) {
+        report_progress(step + 1, untried[i]->name(), false, done.load(), untried.size());
+        std::tie(trials[i], fitted[i]) = try_effect(*untried[i]);
+        report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
+      }
+    };
+    const std::size_t threads = std::min<std::size_t>(fitting_threads(options), untried.size());
+    std::vector<std::thread> pool;
+    for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+    work();
+    for (std::thread& t : pool) t.join();
     const std::size_t tried = static_cast<std::size_t>(
         std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
     const double rmse_before = current.summary.rmse_validation;

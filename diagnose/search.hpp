@@ -4,23 +4,36 @@
 // that lowers the VALIDATION error most, while it passes the significance rule; analyse the residual after each
 // step and report what structure remains.
 #include <cstddef>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
 #include "diagnose/diagnosis.hpp"
 #include "diagnose/effects/effect.hpp"
+#include "diagnose/signals.hpp"
 #include "estimator/imu_series.hpp"
 #include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
 
 namespace imubridge::diagnose {
 
+// Where a running diagnosis is, for a progress display.
+struct DiagnoseProgress {
+  int step = 0;              // 0: the base model; then the step whose candidates are being fitted
+  std::string candidate;     // the effect ("base" at step 0) a thread has started or, with `finished`, finished
+  bool finished = false;
+  std::size_t done = 0;      // candidates of this step finished
+  std::size_t total = 0;     // candidates of this step
+  double elapsed_s = 0.0;    // since run_diagnosis started
+};
+
 struct DiagnoseOptions {
   BaseModel model = BaseModel::kPaper;
-  std::optional<VelocitySource> velocity;  // default: the reference when the series has one, else the IMU
+  std::optional<VelocitySource> velocity;  // default: the reference when the series has one, else the filter
   std::vector<int> axes{0, 1};             // 0 = x, 1 = y
   std::optional<estimator::TimeWindow> train;     // default [0, 33) s, the paper's split
   std::optional<estimator::TimeWindow> validate;  // default from the end of `train` to the end of the data
@@ -37,7 +50,22 @@ struct DiagnoseOptions {
   std::string session;  // how the report names the data
   // A candidate whose fitted values exceed these is refused, whatever its gain.
   estimator::PlausibilityLimits limits;
+  // Candidates fitted at once; 0: one per core. The result does not depend on it.
+  int threads = 0;
+  // Called as the search moves, from the fitting threads (so it must be thread-safe); may be empty.
+  std::function<void(const DiagnoseProgress&)> progress;
 };
+
+// "reference", "imu", "filter": the spellings of --velocity.
+std::string_view name(VelocitySource velocity);
+
+// A multirotor's manoeuvres (attitude changes and the velocity they drive) stay below this; the measurement noise of
+// the filter error method is what lies above it (docs/identification.md).
+inline constexpr double kManoeuvreBandHz = 5.0;
+// The filter that gives the velocity from the IMU alone (VelocitySource::kFilter): the defaults, with the
+// measurement noise set from the data: the RMS of its block means' levelled horizontal specific force above
+// kManoeuvreBandHz over the training window, when larger than the default.
+estimator::DragVelocityConfig filter_config(const Signals& signals, const DiagnoseOptions& options);
 
 // Throws std::invalid_argument for an invalid series, bad options (no axis, a window without data, a reference
 // velocity without a reference) or too few samples in a window (the residual analysis needs 64).

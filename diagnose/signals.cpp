@@ -67,6 +67,24 @@ Signals prepare_signals(const estimator::ImuSeries& series, double derivative_ha
   return s;
 }
 
+std::size_t identification_block(double rate_hz) {
+  const double block = std::round(rate_hz / kIdentificationRateHz);
+  return block >= 1.0 ? static_cast<std::size_t>(block) : 1;
+}
+
+std::vector<estimator::ImuSample> block_means(const Signals& s, std::size_t block, std::size_t blocks) {
+  if (block == 0 || blocks * block > s.size()) throw std::invalid_argument("block_means: blocks beyond the signals");
+  std::vector<estimator::ImuSample> out(blocks);
+  const double scale = 1.0 / static_cast<double>(block);
+  for (std::size_t j = 0; j < blocks; ++j) {
+    estimator::ImuSample& m = out[j];
+    m.t = 0.0, m.gyro.setZero(), m.accel.setZero();
+    for (std::size_t k = j * block; k < (j + 1) * block; ++k) m.t += s.t[k], m.gyro += s.gyro[k], m.accel += s.accel[k];
+    m.t *= scale, m.gyro *= scale, m.accel *= scale;
+  }
+  return out;
+}
+
 std::vector<NamedSignal> candidate_signals(const Signals& s, const std::vector<Vector3d>& velocity_body,
                                            std::size_t first, std::size_t count) {
   if (first + count > s.size() || velocity_body.size() != s.size())

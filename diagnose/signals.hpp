@@ -45,6 +45,16 @@ Eigen::Matrix3d rotation_matrix(const Eigen::Vector3d& rotation_vector);
 // R_bs of the levelled body frame: rotation_matrix(signals.level_mounting).
 inline Eigen::Matrix3d level_rotation(const Signals& signals) { return rotation_matrix(signals.level_mounting); }
 
+// The filter error method (VelocitySource::kFilter) identifies in the manoeuvres' band, below about 5 Hz: its filter
+// runs on block means at about five times that. The blocks average the vibration out, so what the filter is told is
+// noise is close to white, and its one-step prediction spans 40 ms, so a filter that merely follows the measurement
+// predicts no better than the model (docs/identification.md, "From the IMU alone").
+inline constexpr double kIdentificationRateHz = 25.0;
+// Samples per block at `rate_hz`: rate / kIdentificationRateHz, rounded, at least 1.
+std::size_t identification_block(double rate_hz);
+// The means of samples [j * block, (j + 1) * block) for j < blocks (time, gyro, specific force), in IMU axes.
+std::vector<estimator::ImuSample> block_means(const Signals& signals, std::size_t block, std::size_t blocks);
+
 // Half window of the angular acceleration's cubic fit (see estimator::smoothed_derivative).
 inline constexpr double kDerivativeHalfWindowS = 0.0315;
 

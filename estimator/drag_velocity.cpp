@@ -157,20 +157,23 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   }
   for (int axis = 0; axis < 2; ++axis) {
     out.f_var[axis] = f_var;
+    const double k = params_.drag_linear[axis];
+    const double mu = params_.drag_quadratic[axis];
+    // The first axis's update moved the tilt: carry the wind's projection along to first order.
+    const double wind_now =
+        windy_ ? wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt) : 0.0;
+    out.prior_air_velocity[axis] = x_[axis] - wind_now;
+    out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
     if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
       out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
       continue;
     }
-    const double k = params_.drag_linear[axis];
-    const double mu = params_.drag_quadratic[axis];
     const double v_raw = invert_drag(k, mu, out.f[axis]);
     const double slope = drag_slope(k, mu, v_raw);
     out.v_raw[axis] = v_raw;
     out.v_raw_var[axis] = f_var / (slope * slope);
     if (windy_) {
       out.v_raw[axis] = v_raw + wind[axis];
-      // The first axis's update moved the tilt: carry the wind's projection along to first order.
-      const double wind_now = wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt);
       fuse_air_velocity(axis, v_raw, wind_now, wind_jacobian.row(axis).transpose());
     } else {
       fuse_velocity(axis, v_raw);

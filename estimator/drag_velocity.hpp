@@ -48,6 +48,11 @@ struct DragVelocityEstimate {
   Eigen::Vector2d v = Eigen::Vector2d::Zero();          // filtered body-frame horizontal velocity, m/s
   Eigen::Vector2d v_var = Eigen::Vector2d::Zero();      // (m/s)^2
   Eigen::Vector2d gyro_bias = Eigen::Vector2d::Zero();  // estimated body x, y gyro bias, rad/s
+  // The one-step prediction, per axis just before that axis's measurement is fused (x first, then y): the body-axis
+  // air velocity the drag law saw (m/s), and the innovation f - drag(it) (m/s^2). The filter error method
+  // (docs/identification.md) fits the model by these; an axis without drag predicts no force.
+  Eigen::Vector2d prior_air_velocity = Eigen::Vector2d::Zero();
+  Eigen::Vector2d innovation = Eigen::Vector2d::Zero();
 };
 
 struct DragVelocityCounters {

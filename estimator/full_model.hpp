@@ -50,24 +50,32 @@ struct FullModelInput {
   double thrust = 0.0;                                  // T, m/s^2 (g under the paper's assumption)
 };
 
+// The specific force at the IMU in body axes, from the body rates: the mass centre's (drag, -T along z) plus the lever
+// arm's w_dot x r + w x (w x r).
+template <typename T>
+Eigen::Matrix<T, 3, 1> body_specific_force(const T* lever_arm, const T* drag_linear, const T* drag_quadratic,
+                                           const Eigen::Matrix<T, 3, 1>& w, const Eigen::Matrix<T, 3, 1>& w_dot,
+                                           const FullModelInput& in) {
+  using Vec3 = Eigen::Matrix<T, 3, 1>;
+  const Eigen::Map<const Vec3> r(lever_arm);
+  const Vec3 f_cm(drag_specific_force(drag_linear[0], drag_quadratic[0], in.velocity.x()),
+                  drag_specific_force(drag_linear[1], drag_quadratic[1], in.velocity.y()), T(-in.thrust));
+  return f_cm + w_dot.cross(r) + w.cross(w.cross(r));
+}
+
 // The predicted IMU specific force. The parameters come as separate raw blocks (3, 3, 2, 2, 3 values), the layout of
 // Ceres parameter blocks, so an identification can hold any group constant. T is double or a ceres::Jet.
 template <typename T>
 Eigen::Matrix<T, 3, 1> predict_specific_force(const T* lever_arm, const T* mounting, const T* drag_linear,
                                               const T* drag_quadratic, const T* accel_bias, const FullModelInput& in) {
   using Vec3 = Eigen::Matrix<T, 3, 1>;
-  const Eigen::Map<const Vec3> r(lever_arm);
   const Vec3 w_imu = in.gyro.cast<T>();
   const Vec3 w_dot_imu = in.gyro_rate.cast<T>();
   Vec3 w;
   Vec3 w_dot;
   ceres::AngleAxisRotatePoint(mounting, w_imu.data(), w.data());
   ceres::AngleAxisRotatePoint(mounting, w_dot_imu.data(), w_dot.data());
-
-  const Vec3 f_cm(drag_specific_force(drag_linear[0], drag_quadratic[0], in.velocity.x()),
-                  drag_specific_force(drag_linear[1], drag_quadratic[1], in.velocity.y()), T(-in.thrust));
-  const Vec3 f_body = f_cm + w_dot.cross(r) + w.cross(w.cross(r));
-
+  const Vec3 f_body = body_specific_force(lever_arm, drag_linear, drag_quadratic, w, w_dot, in);
   const T body_to_imu[3] = {-mounting[0], -mounting[1], -mounting[2]};
   Vec3 f_imu;
   ceres::AngleAxisRotatePoint(body_to_imu, f_body.data(), f_imu.data());
@@ -77,6 +85,16 @@ Eigen::Matrix<T, 3, 1> predict_specific_force(const T* lever_arm, const T* mount
 inline Eigen::Vector3d predict_specific_force(const FullModelParams& p, const FullModelInput& in) {
   return predict_specific_force(p.lever_arm.data(), p.mounting.data(), p.drag_linear.data(), p.drag_quadratic.data(),
                                 p.accel_bias.data(), in);
+}
+
+// The same for many samples of one model: `imu_to_body` is R_bs = Exp(p.mounting), computed once by the caller
+// instead of three rotations by angle-axis per sample.
+inline Eigen::Vector3d predict_specific_force(const FullModelParams& p, const Eigen::Matrix3d& imu_to_body,
+                                              const FullModelInput& in) {
+  const Eigen::Vector3d w = imu_to_body * in.gyro, w_dot = imu_to_body * in.gyro_rate;
+  return imu_to_body.transpose() *
+             body_specific_force(p.lever_arm.data(), p.drag_linear.data(), p.drag_quadratic.data(), w, w_dot, in) +
+         p.accel_bias;
 }
 
 }  // namespace imubridge::estimator

@@ -3,11 +3,15 @@
 // and DIR/report.html (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
 // goes to stdout.
 #include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -59,8 +63,40 @@ dg::BaseModel parse_model(const std::string& text) {
 dg::VelocitySource parse_velocity(const std::string& text) {
   if (text == "reference") return dg::VelocitySource::kReference;
   if (text == "imu") return dg::VelocitySource::kImu;
-  throw std::invalid_argument("unknown velocity source \"" + text + "\" (valid: reference, imu)");
+  if (text == "filter") return dg::VelocitySource::kFilter;
+  throw std::invalid_argument("unknown velocity source \"" + text + "\" (valid: reference, filter, imu)");
 }
+
+// One line on a terminal's stderr, rewritten as the search moves: the step, the candidates being fitted, how many
+// are done and the time so far. Called from the fitting threads.
+class TerminalProgress {
+ public:
+  void operator()(const dg::DiagnoseProgress& p) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (p.step != step_) fitting_.clear(), step_ = p.step;
+    if (p.finished) {
+      fitting_.erase(std::remove(fitting_.begin(), fitting_.end(), p.candidate), fitting_.end());
+    } else {
+      fitting_.push_back(p.candidate);
+    }
+    std::string names;
+    for (const std::string& n : fitting_) names += (names.empty() ? "" : ", ") + n;
+    if (p.step == 0) {
+      std::fprintf(stderr, "\r\033[Kdiagnose: fitting the base model, %.1f s", p.elapsed_s);
+    } else {
+      std::fprintf(stderr, "\r\033[Kdiagnose: step %d, fitting %s (%zu of %zu candidates done), %.1f s", p.step,
+                   names.empty() ? "-" : names.c_str(), p.done, p.total, p.elapsed_s);
+    }
+    std::fflush(stderr);
+  }
+  // Clears the line, so that what follows starts on a clean one.
+  static void clear() { std::fprintf(stderr, "\r\033[K"), std::fflush(stderr); }
+
+ private:
+  std::mutex mutex_;
+  int step_ = -1;
+  std::vector<std::string> fitting_;
+};
 
 // "F0:F1" in Hz, 0 <= F0 < F1.
 std::pair<double, double> parse_band(const std::string& text) {
@@ -148,17 +184,24 @@ int run(const DiagnoseCliOptions& o) {
   options.session = o.db + "#" + std::to_string(o.session);
 
   const store::Store store(o.db, {.read_only = true});
-  // The reference when the session has one, unless told otherwise.
+  // The reference when the session has one, unless told otherwise. The filter's fit never reads it; a reference
+  // read beside it only scores the velocity in the report.
   using pipeline::ReferenceUse;
   const ReferenceUse reference = !o.velocity                                           ? ReferenceUse::when_present
                                  : *options.velocity == dg::VelocitySource::kReference ? ReferenceUse::required
+                                 : *options.velocity == dg::VelocitySource::kFilter    ? ReferenceUse::when_present
                                                                                        : ReferenceUse::none;
   const pipeline::SessionSeries session =
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference,
                                                        .imu_axes = o.imu_axes});
-  options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kImu;
+  if (!options.velocity)
+    options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kFilter;
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
+  // Progress on a terminal only: a log file or a pipe gets the summary alone.
+  const bool show_progress = isatty(STDERR_FILENO) == 1;
+  if (show_progress) options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
   dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
+  if (show_progress) TerminalProgress::clear();
   diagnosis.imu_axes = session.axes.description;
   diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
 
@@ -194,7 +237,9 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--model", o->model, "Base model: paper (eq. 14 per axis) | full (3-D rigid body and mounting)")
       ->capture_default_str();
   cmd->add_option("--velocity", o->velocity,
-                  "reference | imu (integrated from the gyro, eq. 12); default: reference when the session has one");
+                  "reference | filter (IMU only: the drag-velocity filter's prediction, fitted by the filter "
+                  "error method) | imu (eq. 12's open-loop integral; drifts); default: reference when the session "
+                  "has one, else filter");
   add_window_options(*cmd, o->windows);
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();

@@ -21,12 +21,15 @@
 #include <vector>
 
 #include "diagnose/signals.hpp"
+#include "estimator/drag_velocity.hpp"
 #include "estimator/paper_model.hpp"
 
 namespace imubridge::diagnose {
 
 enum class BaseModel { kPaper, kFull };         // eq. (14) per axis; the 3-D rigid body and mounting
-enum class VelocitySource { kReference, kImu };  // the reference trajectory; integrated from the gyro (eq. 12)
+// The reference trajectory; integrated from the gyro (eq. 12); or the drag-velocity filter's one-step prediction
+// (the filter error method, docs/identification.md), which runs the model being fitted.
+enum class VelocitySource { kReference, kImu, kFilter };
 
 // What the effects know of the diagnosis.
 struct ModelSetup {
@@ -37,6 +40,9 @@ struct ModelSetup {
   std::vector<std::pair<double, double>> ignore_bands;  // Hz: the frequency search leaves these alone
   // > 0: measured and predicted are low-passed alike (zero phase, lowpass.hpp) before they are compared, Hz.
   double lowpass_hz = 0.0;
+  // kFilter: the filter's noises (the measurement noise set from the data: docs/identification.md).
+  estimator::DragVelocityConfig filter{};
+  std::size_t filter_block = 1;  // samples per block mean the filter runs on (identification_block)
 };
 
 struct Parameter {
@@ -57,7 +63,8 @@ struct DragLaw {
 struct ModelInputs {
   std::vector<Eigen::Vector3d> gyro, gyro_rate;  // IMU axes
   std::vector<Eigen::Vector3d> velocity;         // body-axis AIR velocity (ground velocity minus wind), m/s
-  std::vector<Eigen::Quaterniond> attitude;      // body -> NED (reference, or integrated from the gyro)
+  // body -> NED (reference, or integrated from the gyro); empty with kFilter, whose attitude is its own state
+  std::vector<Eigen::Quaterniond> attitude;
   std::vector<double> thrust;                    // T, m/s^2: g, or the measured body-z reading (measured_thrust)
 };
 
