@@ -49,6 +49,7 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
     }
     full = estimator::full_from_paper(out.paper_x, out.paper_y);
   }
+  if (setup.velocity == VelocitySource::kFilter) out.identification.process_noise = model.process_noise(p);
   // The full model's residual frame is the body's: a bias found there is R_bs^T b in IMU axes.
   const Eigen::Matrix3d imu_to_body =
       setup.base == BaseModel::kFull ? rotation_matrix(full.mounting) : Eigen::Matrix3d::Identity();

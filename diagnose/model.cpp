@@ -44,6 +44,12 @@ std::vector<Parameter> base_parameters(const ModelSetup& setup) {
     for (int i = 0; i < 3; ++i) out.push_back({"lever_arm." + std::to_string(i), "m"});
     for (int i = 0; i < 3; ++i) out.push_back({"mounting." + std::to_string(i), "rad"});
   }
+  if (setup.velocity == VelocitySource::kFilter) {
+    // The filter's process noise sets how fast its velocity follows the drag it measures; fitted with the model,
+    // since a fixed wrong one biases the drag found (docs/identification.md). log10 of m/s^2/sqrt(Hz).
+    out.push_back({std::string(Model::kProcessNoiseParameter), "log10(m/s^2/sqrt(Hz))",
+                   std::log10(setup.filter.accel_process_noise), -3.0, 1.5});
+  }
   return out;
 }
 
@@ -273,6 +279,11 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
   return in;
 }
 
+double Model::process_noise(std::span<const double> p) const {
+  if (setup_.velocity != VelocitySource::kFilter) return setup_.filter.accel_process_noise;
+  return std::pow(10.0, p[base_size_ - 1]);
+}
+
 bool Model::filter_runs() const {
   return setup_.velocity == VelocitySource::kFilter &&
          (setup_.base == BaseModel::kPaper ||
@@ -282,13 +293,21 @@ bool Model::filter_runs() const {
 std::vector<Vector3d> Model::filter_velocity(std::span<const double> p, std::size_t until) const {
   const Signals& s = signals();
   // The model as the live estimator runs it (effects it cannot run, such as vibration, act after stage 3 only).
-  const estimator::FullModelParams params = live_params(*this, p).full;
-  estimator::DragVelocityEstimator filter(params, setup_.filter);
+  estimator::FullModelParams params = live_params(*this, p).full;
+  // The time offset shifts the gyro here, as stage 2 does, rather than in the filter's aligner: that one starts the
+  // filter |tau| late, a jump between tau = 0 and any other value that no derivative could step across.
+  std::vector<Vector3d> shifted;
+  if (params.time_offset != 0.0) shifted = delayed(s.t, s.gyro, params.time_offset);
+  const std::span<const Vector3d> gyro = shifted.empty() ? std::span<const Vector3d>(s.gyro) : shifted;
+  params.time_offset = 0.0;
+  estimator::DragVelocityConfig config = setup_.filter;
+  config.accel_process_noise = process_noise(p);
+  estimator::DragVelocityEstimator filter(params, config);
   const std::size_t block = setup_.filter_block;
   const std::size_t delay = static_cast<std::size_t>(filter.delay_samples());
   // Block j's estimate comes delay_samples() blocks after it.
   const std::size_t blocks = until == 0 ? 0 : std::min(s.size() / block, (until - 1) / block + 1 + delay);
-  const std::vector<estimator::ImuSample> means = block_means(s, block, blocks);
+  const std::vector<estimator::ImuSample> means = block_means(s.t, gyro, s.accel, block, blocks);
   std::vector<Vector3d> velocity(s.size(), Vector3d::Zero());
   // Every sample of block j takes the prediction for block j, made from the blocks before it; samples the filter
   // holds no estimate for (the first blocks, those a time offset's aligner waits on) keep the last prediction.
@@ -565,6 +584,8 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range) {
     covariance.GetCovarianceBlock(x, x, c.data());  // symmetric: storage order does not matter
     for (std::size_t i = 0; i < params.size(); ++i)
       out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
+    const Eigen::VectorXd inverse_sd = c.diagonal().cwiseSqrt().cwiseInverse();
+    out.correlation = inverse_sd.asDiagonal() * c * inverse_sd.asDiagonal();
   } else {
     out.covariance_failure = "the Jacobian is rank-deficient: some parameters cannot be told apart with these data";
   }

@@ -9,7 +9,10 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "diagnose/effects/effect.hpp"
 #include "diagnose/signals.hpp"
@@ -43,6 +46,9 @@ class Model {
   // True when the velocity comes from the filter and the model has a drag for it to fuse (else it has nothing to
   // measure and no prediction reads a velocity): every evaluation then runs it.
   bool filter_runs() const;
+  // kFilter: the filter's process noise at p (m/s^2/sqrt(Hz)), the base's last parameter; else the setup's.
+  double process_noise(std::span<const double> p) const;
+  static constexpr std::string_view kProcessNoiseParameter = "process_noise_log10";
   // Where effect i's parameters start in the full vector, and how many it has.
   std::size_t effect_offset(std::size_t i) const { return offsets_[i]; }
   std::size_t effect_size(std::size_t i) const { return offsets_[i + 1] - offsets_[i]; }
@@ -96,6 +102,7 @@ class Model {
 struct FitOutcome {
   std::vector<double> values;
   std::vector<double> std_errors;  // NaN when the covariance could not be computed
+  Eigen::MatrixXd correlation;     // of the estimates; empty when the covariance could not be computed
   std::string covariance_failure;  // why not, or empty
   std::vector<double> convergence;  // sqrt(sum of squared residuals) at the start and after each iteration
   int iterations = 0;

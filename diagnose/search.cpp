@@ -234,7 +234,7 @@ estimator::DragVelocityConfig filter_config(const Signals& signals, const Diagno
   const std::size_t block = identification_block(signals.rate_hz);
   const std::size_t first = train.first / block, last = (train.first + train.count) / block;
   if (last < first + 2) return config;
-  const std::vector<estimator::ImuSample> means = block_means(signals, block, last);
+  const std::vector<estimator::ImuSample> means = block_means(signals.t, signals.gyro, signals.accel, block, last);
   const Eigen::Matrix3d level = level_rotation(signals);
   double sum = 0.0;
   for (int axis = 0; axis < 2; ++axis) {
@@ -249,6 +249,15 @@ estimator::DragVelocityConfig filter_config(const Signals& signals, const Diagno
   return config;
 }
 
+double use_filter(ModelSetup& setup, const Signals& signals, const DiagnoseOptions& options) {
+  setup.velocity = VelocitySource::kFilter;
+  setup.filter = filter_config(signals, options);
+  setup.filter_block = identification_block(signals.rate_hz);
+  const double nyquist = 0.5 * signals.rate_hz / static_cast<double>(setup.filter_block);
+  setup.lowpass_hz = options.lowpass_hz > 0.0 ? std::min(options.lowpass_hz, nyquist) : nyquist;
+  return setup.lowpass_hz;
+}
+
 std::size_t fitting_threads(const DiagnoseOptions& options) {
   if (options.threads > 0) return static_cast<std::size_t>(options.threads);
   return std::max(1u, std::thread::hardware_concurrency());
@@ -256,18 +265,16 @@ std::size_t fitting_threads(const DiagnoseOptions& options) {
 
 Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
   DiagnoseOptions options = requested;
-  if (options.lowpass_hz != 0.0) {
-    if (!(options.lowpass_hz > 0.0)) throw std::invalid_argument("diagnose: the low-pass cutoff must be positive");
-    // Above the band limit the residual holds nothing to fit and no line to report.
-    options.ignore_bands.emplace_back(options.lowpass_hz, std::numeric_limits<double>::infinity());
-  }
+  if (options.lowpass_hz != 0.0 && !(options.lowpass_hz > 0.0))
+    throw std::invalid_argument("diagnose: the low-pass cutoff must be positive");
   const Signals signals = prepare_signals(series);
   ModelSetup setup;
   setup.base = options.model;
   setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::kReference : VelocitySource::kFilter);
-  if (setup.velocity == VelocitySource::kFilter) {
-    setup.filter = filter_config(signals, options);
-    setup.filter_block = identification_block(signals.rate_hz);
+  if (setup.velocity == VelocitySource::kFilter) options.lowpass_hz = use_filter(setup, signals, options);
+  if (options.lowpass_hz != 0.0) {
+    // Above the band limit the residual holds nothing to fit and no line to report.
+    options.ignore_bands.emplace_back(options.lowpass_hz, std::numeric_limits<double>::infinity());
   }
   setup.axes = options.axes;
   setup.signals = &signals;

@@ -67,6 +67,12 @@ inline constexpr double kManoeuvreBandHz = 5.0;
 // kManoeuvreBandHz over the training window, when larger than the default.
 estimator::DragVelocityConfig filter_config(const Signals& signals, const DiagnoseOptions& options);
 
+// Makes `setup` take its velocity from the filter (VelocitySource::kFilter): its noises (filter_config), its blocks
+// (identification_block), and the band the model is compared in: the blocks' Nyquist frequency, or the requested
+// --lowpass when lower. Above it the filter sees nothing, and the vibration there would only bury the innovations
+// the fit is about. Returns that band limit, Hz.
+double use_filter(ModelSetup& setup, const Signals& signals, const DiagnoseOptions& options);
+
 // Throws std::invalid_argument for an invalid series, bad options (no axis, a window without data, a reference
 // velocity without a reference) or too few samples in a window (the residual analysis needs 64).
 Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& options);

@@ -72,14 +72,16 @@ std::size_t identification_block(double rate_hz) {
   return block >= 1.0 ? static_cast<std::size_t>(block) : 1;
 }
 
-std::vector<estimator::ImuSample> block_means(const Signals& s, std::size_t block, std::size_t blocks) {
-  if (block == 0 || blocks * block > s.size()) throw std::invalid_argument("block_means: blocks beyond the signals");
+std::vector<estimator::ImuSample> block_means(std::span<const double> t, std::span<const Vector3d> gyro,
+                                              std::span<const Vector3d> accel, std::size_t block, std::size_t blocks) {
+  if (block == 0 || blocks * block > t.size() || gyro.size() != t.size() || accel.size() != t.size())
+    throw std::invalid_argument("block_means: blocks beyond the signals");
   std::vector<estimator::ImuSample> out(blocks);
   const double scale = 1.0 / static_cast<double>(block);
   for (std::size_t j = 0; j < blocks; ++j) {
     estimator::ImuSample& m = out[j];
     m.t = 0.0, m.gyro.setZero(), m.accel.setZero();
-    for (std::size_t k = j * block; k < (j + 1) * block; ++k) m.t += s.t[k], m.gyro += s.gyro[k], m.accel += s.accel[k];
+    for (std::size_t k = j * block; k < (j + 1) * block; ++k) m.t += t[k], m.gyro += gyro[k], m.accel += accel[k];
     m.t *= scale, m.gyro *= scale, m.accel *= scale;
   }
   return out;

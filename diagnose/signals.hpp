@@ -7,6 +7,7 @@
 #include <array>
 #include <cstddef>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "diagnose/residual_analysis.hpp"
@@ -53,7 +54,9 @@ inline constexpr double kIdentificationRateHz = 25.0;
 // Samples per block at `rate_hz`: rate / kIdentificationRateHz, rounded, at least 1.
 std::size_t identification_block(double rate_hz);
 // The means of samples [j * block, (j + 1) * block) for j < blocks (time, gyro, specific force), in IMU axes.
-std::vector<estimator::ImuSample> block_means(const Signals& signals, std::size_t block, std::size_t blocks);
+std::vector<estimator::ImuSample> block_means(std::span<const double> t, std::span<const Eigen::Vector3d> gyro,
+                                              std::span<const Eigen::Vector3d> accel, std::size_t block,
+                                              std::size_t blocks);
 
 // Half window of the angular acceleration's cubic fit (see estimator::smoothed_derivative).
 inline constexpr double kDerivativeHalfWindowS = 0.0315;

@@ -35,6 +35,7 @@ bool finite(const ImuSample& s) { return std::isfinite(s.t) && s.gyro.allFinite(
 }  // namespace
 
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base) {
+  if (params.identification.process_noise > 0.0) base.accel_process_noise = params.identification.process_noise;
   const auto& rmse = params.identification.rmse;
   // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).
   for (const char* model : {"full", "paper"}) {

@@ -36,7 +36,8 @@ struct DragVelocityConfig {
 // residual RMS (validation window, else fit window) when that is larger than `base`'s. A vibrating airframe's
 // accelerometers read many times their datasheet noise, and a filter that trusts each drag reading as if it were
 // clean swings its velocity with every vibration. Never lower than `base`: a short calm identification window must
-// not make the filter overconfident. Parameters without an identification keep `base`.
+// not make the filter overconfident. Parameters without an identification keep `base`. A process noise the
+// identification fitted (the filter error method) replaces base's.
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base = {});
 
 struct DragVelocityEstimate {

@@ -33,8 +33,8 @@ constexpr std::array<std::pair<std::string_view, ModelKind>, 2> kModels{
     {{"paper", ModelKind::kPaper}, {"full", ModelKind::kFull}}};
 constexpr std::array<std::pair<std::string_view, Method>, 3> kMethods{
     {{"ga", Method::kGa}, {"lm", Method::kLm}, {"ga+lm", Method::kGaLm}}};
-constexpr std::array<std::pair<std::string_view, VelocitySource>, 2> kVelocities{
-    {{"eq12", VelocitySource::kEq12}, {"reference", VelocitySource::kReference}}};
+constexpr std::array<std::pair<std::string_view, VelocitySource>, 3> kVelocities{
+    {{"eq12", VelocitySource::kEq12}, {"reference", VelocitySource::kReference}, {"filter", VelocitySource::kFilter}}};
 
 template <typename Enum, std::size_t N>
 std::string_view spelling(Enum value, const std::array<std::pair<std::string_view, Enum>, N>& names) {
@@ -326,9 +326,47 @@ FullModelParams full_from_paper(const PaperAxisParams& pitch, const PaperAxisPar
   return p;
 }
 
+double eq12_drift(const ImuSeries& series, const Eigen::Vector3d& mounting, const TimeWindow& window) {
+  require_valid(series);
+  FullModelParams rotation_only;
+  rotation_only.mounting = mounting;
+  const LeverArmCompensator imu_to_body(rotation_only);
+  std::vector<Eigen::Vector3d> gyro_body(series.size());
+  for (std::size_t k = 0; k < series.size(); ++k) gyro_body[k] = imu_to_body.to_body(series.gyro[k]);
+  const DeadReckoning dr = dead_reckon(series.t, gyro_body, std::vector<double>(series.size(), kGravity));
+  // The line v = a + b t per horizontal axis, in time relative to the window's start.
+  Eigen::Matrix2d gram = Eigen::Matrix2d::Zero();
+  Eigen::Matrix2d moment = Eigen::Matrix2d::Zero();  // columns: north, east
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    if (series.t[k] < window.start || !(series.t[k] < window.end)) continue;
+    const Eigen::Vector2d phi(1.0, series.t[k] - window.start);
+    gram += phi * phi.transpose();
+    moment += phi * dr.velocity_ned[k].head<2>().transpose();
+  }
+  if (gram(0, 0) < 2.0 || !(gram.determinant() > 0.0)) return 0.0;
+  const Eigen::Matrix2d line = gram.ldlt().solve(moment);  // rows: a, b
+  const double span = std::min(window.end, data_end(series.t)) - window.start;
+  return line.row(1).norm() * span;
+}
+
+std::optional<std::string> eq12_drift_warning(const ImuSeries& series, const Eigen::Vector3d& mounting,
+                                              const TimeWindow& window) {
+  const double drift = eq12_drift(series, mounting, window);
+  if (!(drift > kEq12DriftLimit)) return std::nullopt;
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "eq. (12)'s velocity drifts by %.3g m/s over the training window (more than %g m/s): it is the "
+                "integral's error, not the flight's velocity, and a drag fitted to it fits the drift; use "
+                "--velocity filter",
+                drift, kEq12DriftLimit);
+  return text;
+}
+
 IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
   require_valid(series);
   if (o.velocity == VelocitySource::kReference) require_reference(series, "velocity from the reference");
+  if (o.velocity == VelocitySource::kFilter)
+    throw std::invalid_argument("identify: the filter's velocity is fitted by diagnose::identify_by_filter_error");
   if (o.model == ModelKind::kFull && std::all_of(o.hold.blocks.begin(), o.hold.blocks.end(), [](bool h) { return h; }))
     throw std::invalid_argument("every block of the 3-D model is held: nothing to identify");
   const Windows windows = resolve_windows(series.t, o.train, o.validate);

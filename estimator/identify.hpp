@@ -24,7 +24,9 @@ namespace imubridge::estimator {
 
 enum class ModelKind { kPaper, kFull };           // "paper": eq. (14) per axis; "full": the 3-D model
 enum class Method { kGa, kLm, kGaLm };            // "ga", "lm", "ga+lm"
-enum class VelocitySource { kEq12, kReference };  // "eq12": eq. (12) (3-D: dead_reckon); "reference"
+// "eq12": eq. (12) (3-D: dead_reckon); "reference"; "filter": the drag-velocity filter running the model, fitted by
+// the filter error method (diagnose/filter_identification.hpp: it needs diagnose's model, so identify() refuses it).
+enum class VelocitySource { kEq12, kReference, kFilter };
 
 std::string_view name(ModelKind model);
 std::string_view name(Method method);
@@ -95,6 +97,17 @@ std::vector<PaperSample> prepare_paper(const ImuSeries& series, PaperAxis axis, 
 // The 3-D model's inputs: the body-axis horizontal velocity from dead_reckon() (gyro taken as body rates, T = g:
 // eq. 12's generalisation) or from the reference.
 std::vector<FullSample> prepare_full(const ImuSeries& series, VelocitySource velocity, double half_window);
+
+// Eq. (12)'s integral has nothing that holds it: a gyro bias or a tilt error makes it grow without bound, and a drag
+// fitted to it fits the drift. Its drift over `window`: the change, across the window, of the least-squares line
+// through its horizontal world velocity (the 3-D integral, gyro turned by `mounting`, from the series' first
+// sample), horizontal norm, m/s. A flight's own velocity seldom trends that way for long.
+double eq12_drift(const ImuSeries& series, const Eigen::Vector3d& mounting, const TimeWindow& window);
+// Beyond this drift (m/s) identify and diagnose warn that eq. (12)'s velocity is not the flight's.
+inline constexpr double kEq12DriftLimit = 5.0;
+// The warning, when eq12_drift() exceeds kEq12DriftLimit; nullopt otherwise.
+std::optional<std::string> eq12_drift_warning(const ImuSeries& series, const Eigen::Vector3d& mounting,
+                                              const TimeWindow& window);
 
 // ---- running a method ----
 

@@ -36,8 +36,8 @@ constexpr std::array<std::string_view, 6> kPaperAxisKeys = {"r", "beta", "beta_d
 constexpr std::array<std::string_view, 13> kFullKeys = {
     "lever_arm",   "mounting",  "mounting_deg", "drag_linear", "drag_quadratic", "accel_bias",      "accel_scale",
     "accel_cross", "gyro_bias", "time_offset",  "wind",        "wind_heading",   "wind_heading_deg"};
-constexpr std::array<std::string_view, 6> kIdentificationKeys = {"method",     "seed", "fit_windows",
-                                                                 "validation_windows", "std_errors", "rmse"};
+constexpr std::array<std::string_view, 7> kIdentificationKeys = {
+    "method", "seed", "fit_windows", "validation_windows", "std_errors", "rmse", "process_noise"};
 
 std::string join(const std::string& path, std::string_view key) {
   return path.empty() ? std::string(key) : path + "." + std::string(key);
@@ -230,6 +230,12 @@ Identification read_identification(const json& j, const std::string& path) {
     id.validation_windows = windows_at(j.at("validation_windows"), join(path, "validation_windows"));
   if (j.contains("std_errors")) id.std_errors = numbers_by_name(j.at("std_errors"), join(path, "std_errors"));
   if (j.contains("rmse")) id.rmse = numbers_by_name(j.at("rmse"), join(path, "rmse"));
+  if (j.contains("process_noise")) {
+    id.process_noise = get<double>(j.at("process_noise"), join(path, "process_noise"), "a number");
+    if (!(id.process_noise >= 0.0) || !std::isfinite(id.process_noise))
+      throw std::invalid_argument("PARAMS.json: " + join(path, "process_noise") +
+                                  " must be a finite number >= 0 (m/s^2/sqrt(Hz); 0: the filter's default)");
+  }
   return id;
 }
 
@@ -289,7 +295,8 @@ void to_json(json& j, const Identification& id) {
            {"fit_windows", windows_to_json(id.fit_windows)},
            {"validation_windows", windows_to_json(id.validation_windows)},
            {"std_errors", id.std_errors},
-           {"rmse", id.rmse}};
+           {"rmse", id.rmse},
+           {"process_noise", id.process_noise}};
 }
 
 void from_json(const json& j, Identification& id) { id = read_identification(j, "identification"); }

@@ -32,6 +32,9 @@ struct Identification {
   std::vector<TimeWindow> validation_windows;  // held-out data
   std::map<std::string, double> std_errors;    // by parameter path: "paper.x.r", "full.lever_arm.0", ...
   std::map<std::string, double> rmse;          // m/s^2, by channel and data set: "paper.x.fit", "full.y.validation"
+  // The drag-velocity filter's process noise (m/s^2/sqrt(Hz)) when the identification fitted it (the filter error
+  // method: docs/identification.md); 0: not fitted, the filter's default applies.
+  double process_noise = 0.0;
 
   friend bool operator==(const Identification&, const Identification&) = default;
 };

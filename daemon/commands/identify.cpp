@@ -20,6 +20,7 @@
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "daemon/daemon.hpp"
+#include "diagnose/filter_identification.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
 #include "estimator/constants.hpp"
@@ -37,7 +38,8 @@ struct IdentifyCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
-  std::string model = "paper", method = "lm", velocity = "eq12";
+  std::string model = "paper", method = "lm";
+  std::optional<std::string> velocity;  // default: the reference when the session has one, else the filter
   WindowArgs windows;
   std::vector<std::string> hold, limits;
   est::GaOptions ga;
@@ -52,6 +54,7 @@ Shown shown(const std::string& name) {
   if (name == "beta" || name == "alpha" || name.starts_with("mounting")) return {180.0 / est::kPi, "deg"};
   if (name == "r" || name.starts_with("lever_arm")) return {1.0, "m"};
   if (name == "mu" || name.starts_with("drag_quadratic")) return {1.0, "1/m"};
+  if (name == "process_noise_log10") return {1.0, "log10(m/s^2/sqrt(Hz))"};
   if (name.starts_with("drag_linear")) return {1.0, "1/s"};
   return {1.0, "m/s^2"};  // accel_bias
 }
@@ -77,11 +80,12 @@ void print_correlation(const est::Uncertainty& u) {
   }
 }
 
-void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& result, std::int64_t link,
-                   double wall_seconds) {
+void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& result, est::VelocitySource velocity,
+                   std::int64_t link, double wall_seconds) {
   const est::Identification& id = result.params.identification;
   std::fprintf(stderr, "identified the %s model by %s from session %lld (link %lld), velocity %s\n", o.model.c_str(),
-               id.method.c_str(), static_cast<long long>(o.session), static_cast<long long>(link), o.velocity.c_str());
+               id.method.c_str(), static_cast<long long>(o.session), static_cast<long long>(link),
+               std::string(est::name(velocity)).c_str());
   for (const est::FitReport& fit : result.fits) {
     std::fprintf(stderr, "%s: train %.3f:%.3f s (%zu samples), validate %.3f:%.3f s (%zu samples)\n", fit.name.c_str(),
                  id.fit_windows[0].start, id.fit_windows[0].end, fit.fit_samples, id.validation_windows[0].start,
@@ -114,6 +118,8 @@ void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& resul
     std::fprintf(stderr, "\n");
     if (fit.lm && u.failure.empty()) print_correlation(u);
   }
+  if (id.process_noise > 0.0)
+    std::fprintf(stderr, "the filter's process noise, fitted with the model: %.4g m/s^2/sqrt(Hz)\n", id.process_noise);
   std::fprintf(stderr, "wall time %.3f s; wrote %s\n", wall_seconds, o.out.c_str());
 }
 
@@ -159,8 +165,10 @@ int run(const IdentifyCliOptions& o) {
   est::IdentifyOptions options;
   options.model = est::parse_model(o.model);
   options.method = est::parse_method(o.method);
-  options.velocity = est::parse_velocity(o.velocity);
+  if (o.velocity) options.velocity = est::parse_velocity(*o.velocity);
   options.ga = o.ga;
+  if (o.velocity && options.velocity == est::VelocitySource::kFilter && options.method != est::Method::kLm)
+    throw std::invalid_argument("--velocity filter fits by LM only (the GA would run the filter for every individual)");
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   options.hold = parse_hold(o.hold);
   if (!o.hold.empty() && options.model != est::ModelKind::kFull)
@@ -170,13 +178,19 @@ int run(const IdentifyCliOptions& o) {
   const pipeline::SessionSeries session = pipeline::read_session_series(
       store, o.session,
       {.link = o.link,
-       // Read when present in any case: the velocity the model gives is scored against it.
-       .reference = options.velocity == est::VelocitySource::kReference ? pipeline::ReferenceUse::required
-                                                                        : pipeline::ReferenceUse::when_present,
+       // Read when present in any case: the velocity the model gives is scored against it (the filter's and
+       // eq. (12)'s fits never read it).
+       .reference = o.velocity && options.velocity == est::VelocitySource::kReference
+                        ? pipeline::ReferenceUse::required
+                        : pipeline::ReferenceUse::when_present,
        .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (!o.velocity)
+    options.velocity = session.series.reference ? est::VelocitySource::kReference : est::VelocitySource::kFilter;
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
-  const est::IdentifyResult result = est::identify(session.series, options);
+  const est::IdentifyResult result = options.velocity == est::VelocitySource::kFilter
+                                         ? diagnose::identify_by_filter_error(session.series, options)
+                                         : est::identify(session.series, options);
 
   daemon::save_params(o.out, result.params);
   if (!result.fits.front().convergence.empty()) {
@@ -185,7 +199,12 @@ int run(const IdentifyCliOptions& o) {
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
-  print_summary(o, result, session.link_id, wall);
+  print_summary(o, result, options.velocity, session.link_id, wall);
+  if (options.velocity == est::VelocitySource::kEq12) {
+    if (const auto drift = est::eq12_drift_warning(session.series, result.params.full.mounting,
+                                                   result.params.identification.fit_windows.front()))
+      std::printf("warning: %s\n", drift->c_str());
+  }
   // What the identified model does for the velocity, and whether its values are those of a real airframe.
   const est::Identification& id = result.params.identification;
   const est::Windows windows{id.fit_windows.front(), id.validation_windows.front()};
@@ -214,8 +233,10 @@ const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--method", o->method, "ga (the paper's) | lm (Levenberg-Marquardt) | ga+lm")->capture_default_str();
   add_window_options(*cmd, o->windows);
   add_limit_option(*cmd, o->limits);
-  cmd->add_option("--velocity", o->velocity, "Velocity in the drag term: eq12 (from the gyro) | reference")
-      ->capture_default_str();
+  cmd->add_option("--velocity", o->velocity,
+                  "Velocity in the drag term: reference | filter (IMU only: the drag-velocity filter running the "
+                  "model, fitted by the filter error method) | eq12 (the paper's open-loop integral of the gyro; "
+                  "drifts); default: reference when the session has one, else filter");
   cmd->add_option("--hold", o->hold,
                   "Full model: keep a block at its default, repeatable "
                   "(lever_arm, mounting, drag_linear, drag_quadratic, accel_bias)");
