@@ -94,6 +94,7 @@ struct CandidateTrial {
   std::string rejected_by;
   std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit,
                         // physically implausible)
+  std::vector<std::string> with{};  // effects it needs (Effect::needs), fitted and added together with it
 };
 
 struct Step {
@@ -103,6 +104,7 @@ struct Step {
   double rmse_train_before = 0.0, rmse_validation_before = 0.0;
   std::vector<CandidateTrial> candidates;  // every candidate tried at this step, best validation RMSE first
   std::vector<ResidualAnalysis> residual;  // validation residual after this step, one per axis diagnosed
+  std::vector<std::string> with{};  // the effects it needed, added with it before it
 };
 
 // Structure left in the final residual that no library effect took away.

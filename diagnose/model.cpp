@@ -284,6 +284,10 @@ double Model::process_noise(std::span<const double> p) const {
   return std::pow(10.0, p[base_size_ - 1]);
 }
 
+bool Model::inert(std::size_t i) const {
+  return setup_.velocity == VelocitySource::kFilter && !filter_runs() && i + 1 == base_size_;
+}
+
 bool Model::filter_runs() const {
   return setup_.velocity == VelocitySource::kFilter &&
          (setup_.base == BaseModel::kPaper ||
@@ -548,6 +552,12 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range) {
     cost = central;
   }
   problem.AddResidualBlock(cost, nullptr, x);
+  std::vector<int> held;
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    if (model.inert(i)) held.push_back(static_cast<int>(i));
+  }
+  // An inert parameter moves nothing: held at its start, it leaves the covariance of the others computable.
+  if (!held.empty()) problem.SetManifold(x, new ceres::SubsetManifold(static_cast<int>(params.size()), held));
   for (std::size_t i = 0; i < params.size(); ++i) {
     if (std::isfinite(params[i].lower)) problem.SetParameterLowerBound(x, static_cast<int>(i), params[i].lower);
     if (std::isfinite(params[i].upper)) problem.SetParameterUpperBound(x, static_cast<int>(i), params[i].upper);
@@ -582,8 +592,10 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range) {
   if (covariance.Compute(blocks, &problem)) {
     Eigen::MatrixXd c(params.size(), params.size());
     covariance.GetCovarianceBlock(x, x, c.data());  // symmetric: storage order does not matter
-    for (std::size_t i = 0; i < params.size(); ++i)
-      out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
+    for (std::size_t i = 0; i < params.size(); ++i) {
+      if (!model.inert(i))
+        out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
+    }
     const Eigen::VectorXd inverse_sd = c.diagonal().cwiseSqrt().cwiseInverse();
     out.correlation = inverse_sd.asDiagonal() * c * inverse_sd.asDiagonal();
   } else {

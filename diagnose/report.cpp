@@ -148,6 +148,7 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
   json list = json::array();
   for (const auto& c : candidates) {
     list.push_back({{"effect", c.effect},
+                    {"with", c.with},
                     {"rmse_train", number(c.rmse_train)},
                     {"rmse_validation", number(c.rmse_validation)},
                     {"statistic", number(c.statistic)},
@@ -161,6 +162,7 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
 
 json step_json(const Diagnosis& d, const Step& step) {
   return {{"effect", step.effect},
+          {"with", step.with},
           {"params", parameters_json(step.params)},
           {"rmse_train", number(step.fit.rmse_train)},
           {"rmse_validation", number(step.fit.rmse_validation)},
@@ -640,7 +642,7 @@ void summary_section(const Diagnosis& d, Page& page) {
     result = "no effect added: no candidate passed the significance rule";
   } else {
     std::vector<std::string> effects;
-    for (const auto& step : d.steps) effects.push_back(escape(step.effect));
+    for (const auto& step : d.steps) effects.push_back(escape(with_needed(step.effect, step.with)));
     result = std::to_string(d.steps.size()) + (d.steps.size() == 1 ? " effect" : " effects") + " added (" +
              join(effects, ", ") + "); validation RMSE " + num(d.base.rmse_validation) + " → " +
              num(d.final.rmse_validation) + " m/s² (" +
@@ -710,7 +712,7 @@ void search_section(const Diagnosis& d, Page& page) {
   classes.emplace_back();
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const auto& step = d.steps[i];
-    rows.push_back({std::to_string(i + 1), "+ " + escape(step.effect), parameters_cell(step.params),
+    rows.push_back({std::to_string(i + 1), "+ " + escape(with_needed(step.effect, step.with)), parameters_cell(step.params),
                     std::to_string(step.fit.free_parameters), num(step.fit.rmse_train), num(step.fit.rmse_validation),
                     percent_change(step.rmse_validation_before, step.fit.rmse_validation),
                     velocity(step.fit, false), velocity(step.fit, true), whiteness_cell(d, step.residual)});
@@ -822,7 +824,7 @@ void candidates_table(const std::vector<CandidateTrial>& candidates, const std::
   for (const auto& c : candidates) {
     const bool tried = c.skipped.empty();
     const bool is_chosen = tried && !chosen.empty() && c.effect == chosen;
-    rows.push_back({escape(c.effect), tried ? num(c.rmse_train) : "", tried ? num(c.rmse_validation) : "",
+    rows.push_back({escape(with_needed(c.effect, c.with)), tried ? num(c.rmse_train) : "", tried ? num(c.rmse_validation) : "",
                     tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
                     tried ? (c.significant ? "yes" : "no") : "",
                     is_chosen ? "chosen" : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});
@@ -908,7 +910,7 @@ std::string summary_line(const Diagnosis& d) {
     line += "no effect added";
   } else {
     std::vector<std::string> effects;
-    for (const auto& step : d.steps) effects.push_back(step.effect);
+    for (const auto& step : d.steps) effects.push_back(with_needed(step.effect, step.with));
     line += std::to_string(d.steps.size()) + (d.steps.size() == 1 ? " effect added (" : " effects added (") +
             join(effects, ", ") + ")";
   }
@@ -979,6 +981,12 @@ void write_report_html(const Diagnosis& d, const std::filesystem::path& dir) {
   candidates_section(d, page);
   page.add("</body>\n</html>\n");
   write_text(dir / "report.html", page.html());
+}
+
+std::string with_needed(const std::string& effect, const std::vector<std::string>& with) {
+  std::string out = effect;
+  for (std::size_t i = 0; i < with.size(); ++i) out += (i == 0 ? " (with " : ", ") + with[i];
+  return with.empty() ? out : out + ")";
 }
 
 }  // namespace imubridge::diagnose

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "diagnose/diagnosis.hpp"
 
@@ -20,6 +21,9 @@ inline constexpr std::size_t kReportTopEntries = 5;
 // (rms, mean, Ljung-Box, top peaks and correlations, trend); numbers that are not finite (a standard error the
 // covariance could not give) are null.
 nlohmann::json report_json(const Diagnosis& diagnosis);
+
+// "wind (with quadratic_drag)": an effect and the effects it needed (CandidateTrial::with, Step::with).
+std::string with_needed(const std::string& effect, const std::vector<std::string>& with);
 
 // One line a person reads first: the velocity error before and after the loop (when there is a reference), the
 // specific-force residual beside it, and the effects added. The report's summary and the command's stderr share it.

@@ -342,27 +342,37 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         return {trial, std::nullopt};
       }
       try {
+        // The effects it needs first (a compound candidate), then the effect itself.
         std::vector<const Effect*> effects = current.effects;
+        for (const std::string& needed : effect.needs(setup, in_model)) {
+          effects.push_back(find_effect(needed));
+          trial.with.push_back(needed);
+        }
         effects.push_back(&effect);
         const Model model(signals, setup, effects);
-        // Warm start: the current values, then the new effect's own start.
+        // Warm start: the current values, then each new effect's own start.
         std::vector<double> start = current.fit.values;
         const std::size_t offset = start.size();
         for (std::size_t i = offset; i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
         const std::span<const double> train_t(signals.t.data() + train.first, train.count);
         const StartContext context{setup, train_t, current.train_residual};
-        if (auto why = effect.start(context, std::span<double>(start).subspan(offset))) {
-          trial.skipped = *why;
-          return {trial, std::nullopt};
+        std::vector<std::size_t> drag;
+        for (std::size_t e = current.effects.size(); e < effects.size(); ++e) {
+          const auto own = std::span<double>(start).subspan(model.effect_offset(e), model.effect_size(e));
+          if (auto why = effects[e]->start(context, own)) {
+            trial.skipped = *why;
+            return {trial, std::nullopt};
+          }
+          if (setup.velocity == VelocitySource::kFilter && effects[e]->adds_drag()) {
+            for (std::size_t i = 0; i < model.effect_size(e); ++i) drag.push_back(model.effect_offset(e) + i);
+          }
         }
-        if (setup.velocity == VelocitySource::kFilter && effect.adds_drag()) {
-          std::vector<std::size_t> drag(model.parameters().size() - offset);
-          for (std::size_t i = 0; i < drag.size(); ++i) drag[i] = offset + i;
-          model.scan_drag_start(start, drag, train);
-        }
+        if (!drag.empty()) model.scan_drag_start(start, drag, train);
+        const std::size_t own_offset = model.effect_offset(effects.size() - 1);
         FitOutcome best = fit(model, start, train);
-        for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(offset))) {
-          std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(offset));
+        for (const std::vector<double>& more :
+             effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
+          std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(own_offset));
           FitOutcome other = fit(model, start, train);
           if (other.convergence.back() < best.convergence.back()) best = std::move(other);
         }
@@ -400,47 +410,73 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         return {trial, std::nullopt};
       }
     };
-    std::vector<const Effect*> untried;
+    // Single candidates first. A compound one (an effect with what it needs, Effect::needs) only when no single
+    // candidate passes the rules: the effects it brings along are candidates of their own, and one of them that
+    // passes alone is the simpler explanation.
+    std::vector<const Effect*> singles, compounds;
     for (const auto& effect : effect_library()) {
-      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) == current.effects.end())
-        untried.push_back(effect.get());
+      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) != current.effects.end()) continue;
+      (effect->needs(setup, in_model).empty() ? singles : compounds).push_back(effect.get());
     }
-    // Candidates are independent: fitted on every core at once, kept in library order, so the outcome does not
-    // depend on which finishes first.
-    std::vector<CandidateTrial> trials(untried.size());
-    std::vector<std::optional<State>> fitted(untried.size());
-    std::atomic<std::size_t> next{0}, done{0};
-    const auto work = [&] {
-      for (std::size_t i = next++; i < untried.size(); i = next++) {
-        report_progress(step + 1, untried[i]->name(), false, done.load(), untried.size());
-        std::tie(trials[i], fitted[i]) = try_effect(*untried[i]);
-        report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
+    std::vector<CandidateTrial> trials;
+    std::vector<std::optional<State>> fitted;
+    const double rmse_before = current.summary.rmse_validation;
+    std::size_t tried = 0;
+    double level = options.significance;
+    // Fits `untried` on every core at once, kept in library order so that the outcome does not depend on which
+    // finishes first, and judges every candidate so far by the significance rule.
+    const auto fit_and_judge = [&](const std::vector<const Effect*>& untried) {
+      const std::size_t first = trials.size();
+      trials.resize(first + untried.size());
+      fitted.resize(first + untried.size());
+      std::atomic<std::size_t> next{0}, done{0};
+      const auto work = [&] {
+        for (std::size_t i = next++; i < untried.size(); i = next++) {
+          report_progress(step + 1, untried[i]->name(), false, done.load(), untried.size());
+          std::tie(trials[first + i], fitted[first + i]) = try_effect(*untried[i]);
+          report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
+        }
+      };
+      const std::size_t threads = std::min<std::size_t>(fitting_threads(options), untried.size());
+      std::vector<std::thread> pool;
+      for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+      work();
+      for (std::thread& t : pool) t.join();
+
+      tried = static_cast<std::size_t>(
+          std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
+      level = options.significance / static_cast<double>(std::max<std::size_t>(tried, 1));
+      for (CandidateTrial& t : trials) {
+        if (!t.skipped.empty()) continue;
+        const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
+        const bool passes_f_test = t.p_value < level;
+        t.significant = improves && passes_f_test;
+        char why[260];
+        t.rejected_by.clear();
+        if (!improves) {
+          std::snprintf(why, sizeof why, "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
+                        100.0 * (t.rmse_validation / rmse_before - 1.0), 100.0 * options.min_improvement);
+          t.rejected_by = why;
+        } else if (!passes_f_test) {
+          std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
+                        options.significance, tried);
+          t.rejected_by = why;
+        }
       }
     };
-    const std::size_t threads = std::min<std::size_t>(fitting_threads(options), untried.size());
-    std::vector<std::thread> pool;
-    for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
-    work();
-    for (std::thread& t : pool) t.join();
-    const std::size_t tried = static_cast<std::size_t>(
-        std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
-    const double rmse_before = current.summary.rmse_validation;
-    const double level = options.significance / static_cast<double>(std::max<std::size_t>(tried, 1));
-    for (CandidateTrial& t : trials) {
-      if (!t.skipped.empty()) continue;
-      const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
-      const bool passes_f_test = t.p_value < level;
-      t.significant = improves && passes_f_test;
-      char why[260];
-      if (!improves) {
-        std::snprintf(why, sizeof why,
-                      "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
-                      100.0 * (t.rmse_validation / rmse_before - 1.0), 100.0 * options.min_improvement);
-        t.rejected_by = why;
-      } else if (!passes_f_test) {
-        std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
-                      options.significance, tried);
-        t.rejected_by = why;
+    fit_and_judge(singles);
+    const bool single_passes =
+        std::any_of(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.significant; });
+    if (!single_passes) {
+      fit_and_judge(compounds);
+    } else {
+      for (const Effect* e : compounds) {
+        CandidateTrial trial;
+        trial.effect = std::string(e->name());
+        trial.with = e->needs(setup, in_model);
+        trial.skipped = "a compound candidate, tried only when no single candidate passes the rules";
+        trials.push_back(std::move(trial));
+        fitted.emplace_back();
       }
     }
     // Best validation RMSE first; the skipped after, in library order.
@@ -460,6 +496,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     }
     Step s;
     s.effect = trials[order.front()].effect;
+    s.with = trials[order.front()].with;
     s.rmse_train_before = current.summary.rmse_train;
     s.rmse_validation_before = rmse_before;
     current = std::move(*fitted[order.front()]);

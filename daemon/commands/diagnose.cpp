@@ -142,7 +142,7 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const dg::Step& s = d.steps[i];
     std::printf("step %zu: + %s: RMSE train %.4f -> %.4f, validation %.4f -> %.4f m/s^2\n", i + 1,
-                 s.effect.c_str(), s.rmse_train_before, s.fit.rmse_train, s.rmse_validation_before,
+                 dg::with_needed(s.effect, s.with).c_str(), s.rmse_train_before, s.fit.rmse_train, s.rmse_validation_before,
                  s.fit.rmse_validation);
     print_params(s.params);
     print_velocity(s.fit);

@@ -96,6 +96,12 @@ class Effect {
     (void)in_model;
     return std::nullopt;
   }
+  // Effects this one only shows together with, from the library, when the model lacks them: the search fits the
+  // candidate with them added first (docs/effects.md, "Compound effects"). Empty by default.
+  virtual std::vector<std::string> needs(const ModelSetup&, std::span<const std::string> in_model) const {
+    (void)in_model;
+    return {};
+  }
   virtual std::vector<Parameter> parameters(const ModelSetup&) const = 0;
   // Starting values (defaults: each Parameter::initial, already in `p`); an error when the data offer none.
   virtual std::optional<std::string> start(const StartContext&, std::span<double> p) const {

@@ -10,8 +10,17 @@ class Wind final : public Effect {
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     const bool drag = setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") ||
                       contains(in_model, "quadratic_drag");
-    if (!drag) return "wind acts through drag, and the model has none yet";
+    if (!drag && needs(setup, in_model).empty()) return "wind acts through drag, and the model has none yet";
     return std::nullopt;
+  }
+  // From the IMU alone a linear drag turns a wind into a constant force, which a tilt of the sensor gives as well:
+  // only the quadratic law's asymmetry (upwind and downwind manoeuvres drag differently) and turns of the heading
+  // tell the wind apart. So without a quadratic drag, the wind comes with one.
+  std::vector<std::string> needs(const ModelSetup& setup, std::span<const std::string> in_model) const override {
+    if (setup.velocity != VelocitySource::kFilter || setup.base == BaseModel::kPaper ||
+        contains(in_model, "quadratic_drag"))
+      return {};
+    return {"quadratic_drag"};
   }
   std::vector<Parameter> parameters(const ModelSetup&) const override {
     return {{"north", "m/s", 0.0, -30.0, 30.0}, {"east", "m/s", 0.0, -30.0, 30.0}};

@@ -1,0 +1,111 @@
+// identify and diagnose on the real EuRoC MH_01 flight, as docs/results.md runs them: the 3-D model, trained on the
+// first 40 % of the flight (found from the rotors' vibration) and validated on the rest, with the reference's
+// velocity and from the IMU alone (the filter error method); diagnose compares below 10 Hz. Wall time on all cores.
+// The flight is read from IMUBRIDGE_EUROC_DIR, default ../shared/data/real/euroc_mh01 beside the repository; without
+// it the benchmarks say so and skip.
+#include <benchmark/benchmark.h>
+
+#include <utility>
+
+#include <cstdlib>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "diagnose/filter_identification.hpp"
+#include "diagnose/search.hpp"
+#include "estimator/flight_span.hpp"
+#include "estimator/identify.hpp"
+#include "pipeline/session_series.hpp"
+#include "replay/euroc_import.hpp"
+#include "scratch_dir.hpp"
+#include "store/store.hpp"
+
+namespace imubridge::bench {
+namespace {
+
+std::filesystem::path euroc_dir() {
+  if (const char* dir = std::getenv("IMUBRIDGE_EUROC_DIR")) return dir;
+  return std::filesystem::path(IMUBRIDGE_SOURCE_DIR) / ".." / "shared" / "data" / "real" / "euroc_mh01";
+}
+
+// The flight, imported once, with its windows.
+struct RealFlight {
+  estimator::ImuSeries series;
+  estimator::TimeWindow train, validate;
+};
+
+const std::optional<RealFlight>& real_flight() {
+  static const std::optional<RealFlight> flight = []() -> std::optional<RealFlight> {
+    const std::filesystem::path dir = euroc_dir();
+    if (!std::filesystem::exists(dir / "mav0" / "imu0" / "data.csv")) return std::nullopt;
+    ScratchDir scratch;
+    store::Store store(scratch.database());
+    replay::EurocImportOptions options;
+    options.dir = dir;
+    options.reference = replay::ReferenceFile{dir / "MH_01_easy.txt", replay::ReferenceFormat::tum};
+    const auto imported = replay::import_euroc(store, options);
+    RealFlight out;
+    out.series = pipeline::read_session_series(store, imported.session,
+                                               {.reference = pipeline::ReferenceUse::when_present})
+                     .series;
+    const auto span = estimator::detect_flight(out.series);
+    if (!span) return std::nullopt;
+    out.train = estimator::parse_window("0:40%", span->window);
+    out.validate = estimator::parse_window("40%:", span->window);
+    return out;
+  }();
+  return flight;
+}
+
+bool skip_without_flight(benchmark::State& state) {
+  if (real_flight()) return false;
+  state.SkipWithError(("no EuRoC MH_01 flight at " + euroc_dir().string() + " (set IMUBRIDGE_EUROC_DIR)").c_str());
+  return true;
+}
+
+void Identify(benchmark::State& state, estimator::VelocitySource velocity) {
+  if (skip_without_flight(state)) return;
+  estimator::IdentifyOptions options;
+  options.model = estimator::ModelKind::kFull;
+  options.velocity = velocity;
+  options.train = real_flight()->train;
+  options.validate = real_flight()->validate;
+  options.hold.blocks[static_cast<int>(estimator::FullBlock::kAccelBias)] = true;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(velocity == estimator::VelocitySource::kFilter
+                                 ? diagnose::identify_by_filter_error(real_flight()->series, options)
+                                 : estimator::identify(real_flight()->series, options));
+  }
+}
+
+void Diagnose(benchmark::State& state, diagnose::VelocitySource velocity) {
+  if (skip_without_flight(state)) return;
+  diagnose::DiagnoseOptions options;
+  options.model = diagnose::BaseModel::kFull;
+  options.velocity = velocity;
+  options.train = real_flight()->train;
+  options.validate = real_flight()->validate;
+  options.lowpass_hz = 10.0;
+  for (auto _ : state) benchmark::DoNotOptimize(diagnose::run_diagnosis(real_flight()->series, options));
+}
+
+BENCHMARK_CAPTURE(Identify, FullReference, estimator::VelocitySource::kReference)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK_CAPTURE(Identify, FullImuAlone, estimator::VelocitySource::kFilter)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK_CAPTURE(Diagnose, FullReference, diagnose::VelocitySource::kReference)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime()
+    ->Iterations(1);
+BENCHMARK_CAPTURE(Diagnose, FullImuAlone, diagnose::VelocitySource::kFilter)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime()
+    ->Iterations(1);
+
+}  // namespace
+}  // namespace imubridge::bench
