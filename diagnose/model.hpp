@@ -113,6 +113,6 @@ struct FitOutcome {
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
 // ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does.
-FitOutcome fit(const Model& model, std::vector<double> start, Range range);
+FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50);
 
 }  // namespace imubridge::diagnose

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <future>
 #include <thread>
 #include <tuple>
 #include <boost/math/distributions/fisher_f.hpp>
@@ -369,13 +370,32 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         }
         if (!drag.empty()) model.scan_drag_start(start, drag, train);
         const std::size_t own_offset = model.effect_offset(effects.size() - 1);
-        FitOutcome best = fit(model, start, train);
+        // Several starting points: each is screened by a few iterations, at once, on a model of its own (a model's
+        // caches are not shared between threads); the one with the lowest training cost then (the earlier on a tie)
+        // is fitted to convergence. The basins the starts are for differ from the first iterations on.
+        std::vector<std::vector<double>> starts{start};
         for (const std::vector<double>& more :
              effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
-          std::copy(more.begin(), more.end(), start.begin() + static_cast<std::ptrdiff_t>(own_offset));
-          FitOutcome other = fit(model, start, train);
-          if (other.convergence.back() < best.convergence.back()) best = std::move(other);
+          starts.push_back(start);
+          std::copy(more.begin(), more.end(), starts.back().begin() + static_cast<std::ptrdiff_t>(own_offset));
         }
+        std::vector<double> chosen_start = starts.front();
+        if (starts.size() > 1) {
+          constexpr int kScreenIterations = 8;
+          std::vector<std::future<FitOutcome>> screened;
+          for (std::size_t i = 0; i < starts.size(); ++i) {
+            screened.push_back(std::async(std::launch::async, [&, i] {
+              const Model own(signals, setup, effects);
+              return fit(own, starts[i], train, kScreenIterations);
+            }));
+          }
+          double lowest = std::numeric_limits<double>::infinity();
+          for (std::future<FitOutcome>& s : screened) {
+            FitOutcome o = s.get();
+            if (o.convergence.back() < lowest) lowest = o.convergence.back(), chosen_start = std::move(o.values);
+          }
+        }
+        FitOutcome best = fit(model, chosen_start, train);
         if (auto why = judge_tilt ? unflyable(model, best.values, train, validation) : std::nullopt) {
           trial.skipped = *why;
           return {trial, std::nullopt};
