@@ -5,12 +5,11 @@
 // it the benchmarks say so and skip.
 #include <benchmark/benchmark.h>
 
-#include <utility>
-
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "diagnose/filter_identification.hpp"
 #include "diagnose/search.hpp"
@@ -46,9 +45,9 @@ const std::optional<RealFlight>& real_flight() {
     options.reference = replay::ReferenceFile{dir / "MH_01_easy.txt", replay::ReferenceFormat::tum};
     const auto imported = replay::import_euroc(store, options);
     RealFlight out;
-    out.series = pipeline::read_session_series(store, imported.session,
-                                               {.reference = pipeline::ReferenceUse::when_present})
-                     .series;
+    out.series =
+        pipeline::read_session_series(store, imported.session, {.reference = pipeline::ReferenceUse::when_present})
+            .series;
     const auto span = estimator::detect_flight(out.series);
     if (!span) return std::nullopt;
     out.train = estimator::parse_window("0:40%", span->window);

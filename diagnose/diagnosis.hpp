@@ -32,8 +32,8 @@ struct SpectralPeak {
 struct ResidualAnalysis {
   std::size_t samples = 0;
   double sample_rate_hz = 0.0;  // 1 / median sample step
-  double rms = 0.0;   // m/s^2
-  double mean = 0.0;  // m/s^2
+  double rms = 0.0;             // m/s^2
+  double mean = 0.0;            // m/s^2
   // Normalised autocorrelation at lags 0..max_lag samples (acf[0] = 1).
   std::vector<double> autocorrelation;
   // Ljung-Box portmanteau test on the autocorrelation of the (decimated, see docs) residual.
@@ -45,7 +45,7 @@ struct ResidualAnalysis {
   // Welch power spectral density, one-sided, (m/s^2)^2/Hz.
   std::vector<double> frequency_hz;
   std::vector<double> psd;
-  std::vector<SpectralPeak> peaks;  // strongest first
+  std::vector<SpectralPeak> peaks;              // strongest first
   std::vector<SignalCorrelation> correlations;  // strongest |coefficient| first
   // Linear trend of the residual over time: slope, its standard error, significant when |slope| > 3 std errors.
   double trend_per_s = 0.0;
@@ -65,12 +65,12 @@ struct ParameterEstimate {
 
 // One fitted model: the base model plus zero or more effects, fitted together on the training window.
 struct ModelFit {
-  std::vector<std::string> effects;        // names as in docs/effects.md, in the order added (empty: base model)
-  std::vector<ParameterEstimate> base_params;            // the base model's parameters, refitted with the effects
+  std::vector<std::string> effects;            // names as in docs/effects.md, in the order added (empty: base model)
+  std::vector<ParameterEstimate> base_params;  // the base model's parameters, refitted with the effects
   std::vector<std::vector<ParameterEstimate>> effect_params;  // one list per entry of `effects`
   std::size_t free_parameters = 0;
-  double rmse_train = 0.0;       // m/s^2, over the axes diagnosed
-  double rmse_validation = 0.0;  // m/s^2
+  double rmse_train = 0.0;          // m/s^2, over the axes diagnosed
+  double rmse_validation = 0.0;     // m/s^2
   std::vector<double> convergence;  // cost (sqrt of the sum of squared residuals) after each solver iteration
   // Parameters at or within 1 % of a bound of their search range: the data pushed them there, so their value says
   // more about the range than about the vehicle. One readable line each.
@@ -98,20 +98,20 @@ struct CandidateTrial {
 };
 
 struct Step {
-  std::string effect;  // the effect added at this step
+  std::string effect;                     // the effect added at this step
   std::vector<ParameterEstimate> params;  // its parameters, after the refit of everything
   ModelFit fit;                           // the whole model after this step
   double rmse_train_before = 0.0, rmse_validation_before = 0.0;
   std::vector<CandidateTrial> candidates;  // every candidate tried at this step, best validation RMSE first
   std::vector<ResidualAnalysis> residual;  // validation residual after this step, one per axis diagnosed
-  std::vector<std::string> with{};  // the effects it needed, added with it before it
+  std::vector<std::string> with{};         // the effects it needed, added with it before it
 };
 
 // Structure left in the final residual that no library effect took away.
 struct Unexplained {
-  std::string kind;    // "frequency", "correlation" or "trend"
-  std::string axis;    // "x" or "y"
-  std::string where;   // one readable line: "line at 37.5 Hz, 40x the median power", "accel.z at lag +0.010 s, r=0.41"
+  std::string kind;   // "frequency", "correlation" or "trend"
+  std::string axis;   // "x" or "y"
+  std::string where;  // one readable line: "line at 37.5 Hz, 40x the median power", "accel.z at lag +0.010 s, r=0.41"
   double frequency_hz = 0.0;  // kind == "frequency"
   std::string signal;         // kind == "correlation"
   double lag_s = 0.0;         // kind == "correlation"
@@ -120,17 +120,17 @@ struct Unexplained {
 
 // Per axis, the validation window's signals for the plots.
 struct AxisSeries {
-  std::string axis;  // "x" or "y"
-  std::vector<double> t;  // s, session time
+  std::string axis;                                       // "x" or "y"
+  std::vector<double> t;                                  // s, session time
   std::vector<double> measured, base_model, final_model;  // m/s^2
 };
 
 struct Diagnosis {
   // What was asked.
-  std::string session;          // "DB#ID" or a description of the data
-  std::string model;            // "paper" or "full"
+  std::string session;            // "DB#ID" or a description of the data
+  std::string model;              // "paper" or "full"
   std::vector<std::string> axes;  // "x", "y"
-  std::string velocity_source;  // "reference" or "imu" (eq. 12 / dead reckoning from the gyro-integrated tilt)
+  std::string velocity_source;    // "reference" or "imu" (eq. 12 / dead reckoning from the gyro-integrated tilt)
   double train_start = 0.0, train_end = 0.0, validate_start = 0.0, validate_end = 0.0;  // s
   std::string significance_rule;  // one line: the rule and its level
   // What was found.

@@ -129,7 +129,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
     for (std::size_t e = 0; e < effects.size(); ++e) {
       const std::string block = effects[e]->name() == "linear_drag"      ? "drag_linear"
                                 : effects[e]->name() == "quadratic_drag" ? "drag_quadratic"
-                                                                          : "accel_bias";
+                                                                         : "accel_bias";
       for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e) + model.effect_size(e); ++i)
         paths[i] = "full." + block + "." + std::to_string(model.parameters()[i].name.back() - 'x');
     }

@@ -114,8 +114,8 @@ void record_fit(estimator::ModelParams& params, const Model& model, std::span<co
   estimator::Identification& id = params.identification;
   id.method = "diagnose";
   const auto window = [&](Range r) {
-    const double end = r.first + r.count < signals.size() ? signals.t[r.first + r.count]
-                                                            : signals.t.back() + 1.0 / signals.rate_hz;
+    const double end =
+        r.first + r.count < signals.size() ? signals.t[r.first + r.count] : signals.t.back() + 1.0 / signals.rate_hz;
     return estimator::TimeWindow{signals.t[r.first], end};
   };
   id.fit_windows = {window(train)};

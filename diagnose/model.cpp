@@ -1,8 +1,5 @@
 #include "diagnose/model.hpp"
 
-#include "diagnose/live_model.hpp"
-#include "diagnose/lowpass.hpp"
-
 #include <ceres/ceres.h>
 
 #include <Eigen/Dense>
@@ -11,6 +8,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "diagnose/live_model.hpp"
+#include "diagnose/lowpass.hpp"
 #include "estimator/constants.hpp"
 #include "estimator/drag_law.hpp"
 #include "estimator/full_model.hpp"
@@ -259,8 +258,8 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
     in.attitude.resize(n);
     for (std::size_t k = 0; k < n; ++k) {
       in.velocity[k] = {-v_pitch[k], -v_roll[k], 0.0};
-      in.attitude[k] = Eigen::AngleAxisd(pitch.theta[k], Vector3d::UnitY()) *
-                       Eigen::AngleAxisd(-roll.theta[k], Vector3d::UnitX());
+      in.attitude[k] =
+          Eigen::AngleAxisd(pitch.theta[k], Vector3d::UnitY()) * Eigen::AngleAxisd(-roll.theta[k], Vector3d::UnitX());
     }
   } else {
     // The 3-D generalisation: the gyro turned into body axes by the mounting being fitted.
@@ -268,8 +267,8 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
     std::vector<Vector3d> gyro_body(n);
     for (std::size_t k = 0; k < n; ++k) gyro_body[k] = imu_to_body * in.gyro[k];
     const std::vector<double> g(n, kGravity);
-    const estimator::DeadReckoning dr = drag_in_dynamics ? dead_reckon_with_drag(t, gyro_body, g, law, wind)
-                                                         : estimator::dead_reckon(t, gyro_body, g);
+    const estimator::DeadReckoning dr =
+        drag_in_dynamics ? dead_reckon_with_drag(t, gyro_body, g, law, wind) : estimator::dead_reckon(t, gyro_body, g);
     in.attitude = dr.attitude;
     in.velocity = estimator::body_velocity(dr.attitude, dr.velocity_ned);
   }
@@ -365,9 +364,9 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
                                             .omega_dot = pitch ? in.gyro_rate[j].y() : -in.gyro_rate[j].x(),
                                             .v = -in.velocity[j][axis]};
         // Eq. (14) takes U1 = g; with the thrust effect it is the measured T.
-        predicted[k][axis] = estimator::paper_specific_force(c, sample) + (in.thrust[j] - kGravity) * sin_alpha +
-                             estimator::drag_specific_force(effect_drag.k[axis], effect_drag.mu[axis],
-                                                            in.velocity[j][axis]);
+        predicted[k][axis] =
+            estimator::paper_specific_force(c, sample) + (in.thrust[j] - kGravity) * sin_alpha +
+            estimator::drag_specific_force(effect_drag.k[axis], effect_drag.mu[axis], in.velocity[j][axis]);
       }
     }
   } else {
@@ -378,10 +377,11 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
     ctx.imu_to_body = rotation(p.data() + 3);
     for (std::size_t k = 0; k < range.count; ++k) {
       const std::size_t j = range.first + k;
-      predicted[k] = estimator::predict_specific_force(full, ctx.imu_to_body, {.gyro = in.gyro[j],
-                                                              .gyro_rate = in.gyro_rate[j],
-                                                              .velocity = in.velocity[j].head<2>(),
-                                                              .thrust = in.thrust[j]});
+      predicted[k] = estimator::predict_specific_force(full, ctx.imu_to_body,
+                                                       {.gyro = in.gyro[j],
+                                                        .gyro_rate = in.gyro_rate[j],
+                                                        .velocity = in.velocity[j].head<2>(),
+                                                        .thrust = in.thrust[j]});
     }
   }
   // 4. sensor

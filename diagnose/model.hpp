@@ -4,6 +4,7 @@
 // generic fit: Levenberg-Marquardt (Ceres) on every free parameter with a central numeric-difference Jacobian,
 // because effects such as a gyro bias or the self-consistent velocity change the velocity integrated over the whole
 // flight. Deterministic and single-threaded.
+#include <Eigen/Core>
 #include <cstddef>
 #include <list>
 #include <optional>
@@ -11,8 +12,6 @@
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "diagnose/effects/effect.hpp"
 #include "diagnose/signals.hpp"
@@ -89,7 +88,7 @@ class Model {
   std::vector<const Effect*> effects_;
   std::vector<Parameter> parameters_;
   std::size_t base_size_ = 0;
-  std::vector<std::size_t> offsets_;  // effects' first parameters, then the total
+  std::vector<std::size_t> offsets_;         // effects' first parameters, then the total
   std::optional<ModelInputs> fixed_inputs_;  // when no parameter changes stages 1-3
   std::vector<bool> input_parameter_;        // which parameters stages 1-3 depend on
   mutable std::vector<double> cached_key_;   // their values for cached_inputs_
@@ -103,9 +102,9 @@ class Model {
 
 struct FitOutcome {
   std::vector<double> values;
-  std::vector<double> std_errors;  // NaN when the covariance could not be computed
-  Eigen::MatrixXd correlation;     // of the estimates; empty when the covariance could not be computed
-  std::string covariance_failure;  // why not, or empty
+  std::vector<double> std_errors;   // NaN when the covariance could not be computed
+  Eigen::MatrixXd correlation;      // of the estimates; empty when the covariance could not be computed
+  std::string covariance_failure;   // why not, or empty
   std::vector<double> convergence;  // sqrt(sum of squared residuals) at the start and after each iteration
   int iterations = 0;
   bool converged = false;

@@ -712,10 +712,11 @@ void search_section(const Diagnosis& d, Page& page) {
   classes.emplace_back();
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const auto& step = d.steps[i];
-    rows.push_back({std::to_string(i + 1), "+ " + escape(with_needed(step.effect, step.with)), parameters_cell(step.params),
-                    std::to_string(step.fit.free_parameters), num(step.fit.rmse_train), num(step.fit.rmse_validation),
-                    percent_change(step.rmse_validation_before, step.fit.rmse_validation),
-                    velocity(step.fit, false), velocity(step.fit, true), whiteness_cell(d, step.residual)});
+    rows.push_back({std::to_string(i + 1), "+ " + escape(with_needed(step.effect, step.with)),
+                    parameters_cell(step.params), std::to_string(step.fit.free_parameters), num(step.fit.rmse_train),
+                    num(step.fit.rmse_validation),
+                    percent_change(step.rmse_validation_before, step.fit.rmse_validation), velocity(step.fit, false),
+                    velocity(step.fit, true), whiteness_cell(d, step.residual)});
     classes.emplace_back();
   }
   std::vector<std::string> model{"base model"};
@@ -729,13 +730,14 @@ void search_section(const Diagnosis& d, Page& page) {
               "Δ validation", "Velocity RMSE train (m/s)", "Velocity RMSE validation (m/s)", "Residual"},
              rows, classes);
   if (d.zero_velocity) {
-    page.paragraph("Velocity RMSE: the drag-velocity estimator run with each step's model (horizontal (x, y), against "
-                   "the reference; zero velocity scores " +
-                       num(d.zero_velocity->train.horizontal, 3) + " on the training and " +
-                       num(d.zero_velocity->validation.horizontal, 3) +
-                       " m/s on the validation window). * a model without a drag law on an axis gives no velocity: "
-                       "scored as zero velocity.",
-                   "note");
+    page.paragraph(
+        "Velocity RMSE: the drag-velocity estimator run with each step's model (horizontal (x, y), against "
+        "the reference; zero velocity scores " +
+            num(d.zero_velocity->train.horizontal, 3) + " on the training and " +
+            num(d.zero_velocity->validation.horizontal, 3) +
+            " m/s on the validation window). * a model without a drag law on an axis gives no velocity: "
+            "scored as zero velocity.",
+        "note");
   }
 }
 
@@ -824,8 +826,8 @@ void candidates_table(const std::vector<CandidateTrial>& candidates, const std::
   for (const auto& c : candidates) {
     const bool tried = c.skipped.empty();
     const bool is_chosen = tried && !chosen.empty() && c.effect == chosen;
-    rows.push_back({escape(with_needed(c.effect, c.with)), tried ? num(c.rmse_train) : "", tried ? num(c.rmse_validation) : "",
-                    tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
+    rows.push_back({escape(with_needed(c.effect, c.with)), tried ? num(c.rmse_train) : "",
+                    tried ? num(c.rmse_validation) : "", tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
                     tried ? (c.significant ? "yes" : "no") : "",
                     is_chosen ? "chosen" : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});
     classes.emplace_back(is_chosen ? "chosen" : "");
@@ -887,7 +889,8 @@ std::string summary_line(const Diagnosis& d) {
   char text[400];
   std::string line;
   if (d.base.velocity && d.final.velocity) {
-    std::snprintf(text, sizeof text, "velocity RMSE on the validation window %.3f -> %.3f m/s (horizontal; x %.3f -> %.3f, y %.3f -> %.3f",
+    std::snprintf(text, sizeof text,
+                  "velocity RMSE on the validation window %.3f -> %.3f m/s (horizontal; x %.3f -> %.3f, y %.3f -> %.3f",
                   d.base.velocity->validation.horizontal, d.final.velocity->validation.horizontal,
                   d.base.velocity->validation.axis.x(), d.final.velocity->validation.axis.x(),
                   d.base.velocity->validation.axis.y(), d.final.velocity->validation.axis.y());

@@ -2,16 +2,16 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
-#include <future>
-#include <thread>
-#include <tuple>
 #include <boost/math/distributions/fisher_f.hpp>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <future>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <thread>
+#include <tuple>
 
 #include "diagnose/effects/library.hpp"
 #include "diagnose/live_model.hpp"
@@ -81,7 +81,7 @@ struct State {
   ModelFit summary;
   AxisValues train_residual, validation_residual;
   std::vector<std::string> implausible_limits;  // the plausibility limits this model already exceeds
-  estimator::ModelParams params;                 // the model as the live estimator runs it
+  estimator::ModelParams params;                // the model as the live estimator runs it
 };
 
 std::vector<std::string> names_of(const std::vector<const Effect*>& effects) {
@@ -189,7 +189,8 @@ std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params,
     const bool lower = near(p.lower), upper = near(p.upper);
     if (!lower && !upper) continue;
     char text[240];
-    std::snprintf(text, sizeof text, "%s %s = %.6g %s is at its %s bound %g: the data pushed it to the edge of its range",
+    std::snprintf(text, sizeof text,
+                  "%s %s = %.6g %s is at its %s bound %g: the data pushed it to the edge of its range",
                   owners[i].c_str(), p.name.c_str(), values[i], p.unit.c_str(), lower ? "lower" : "upper",
                   lower ? p.lower : p.upper);
     out.push_back(text);
@@ -218,9 +219,12 @@ double effective_samples(std::span<const double> x, std::size_t max_lag) {
 
 std::string_view name(VelocitySource velocity) {
   switch (velocity) {
-    case VelocitySource::kReference: return "reference";
-    case VelocitySource::kImu: return "imu";
-    case VelocitySource::kFilter: return "filter";
+    case VelocitySource::kReference:
+      return "reference";
+    case VelocitySource::kImu:
+      return "imu";
+    case VelocitySource::kFilter:
+      return "filter";
   }
   return "?";
 }
@@ -374,8 +378,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         // caches are not shared between threads); the one with the lowest training cost then (the earlier on a tie)
         // is fitted to convergence. The basins the starts are for differ from the first iterations on.
         std::vector<std::vector<double>> starts{start};
-        for (const std::vector<double>& more :
-             effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
+        for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
           starts.push_back(start);
           std::copy(more.begin(), more.end(), starts.back().begin() + static_cast<std::ptrdiff_t>(own_offset));
         }

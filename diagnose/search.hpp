@@ -23,18 +23,18 @@ namespace imubridge::diagnose {
 
 // Where a running diagnosis is, for a progress display.
 struct DiagnoseProgress {
-  int step = 0;              // 0: the base model; then the step whose candidates are being fitted
-  std::string candidate;     // the effect ("base" at step 0) a thread has started or, with `finished`, finished
+  int step = 0;           // 0: the base model; then the step whose candidates are being fitted
+  std::string candidate;  // the effect ("base" at step 0) a thread has started or, with `finished`, finished
   bool finished = false;
-  std::size_t done = 0;      // candidates of this step finished
-  std::size_t total = 0;     // candidates of this step
-  double elapsed_s = 0.0;    // since run_diagnosis started
+  std::size_t done = 0;    // candidates of this step finished
+  std::size_t total = 0;   // candidates of this step
+  double elapsed_s = 0.0;  // since run_diagnosis started
 };
 
 struct DiagnoseOptions {
   BaseModel model = BaseModel::kPaper;
-  std::optional<VelocitySource> velocity;  // default: the reference when the series has one, else the filter
-  std::vector<int> axes{0, 1};             // 0 = x, 1 = y
+  std::optional<VelocitySource> velocity;         // default: the reference when the series has one, else the filter
+  std::vector<int> axes{0, 1};                    // 0 = x, 1 = y
   std::optional<estimator::TimeWindow> train;     // default [0, 33) s, the paper's split
   std::optional<estimator::TimeWindow> validate;  // default from the end of `train` to the end of the data
   std::vector<std::pair<double, double>> ignore_bands;  // Hz: no vibration is fitted there, no line reported

@@ -22,12 +22,12 @@ struct ReferenceSignals {
 };
 
 struct Signals {
-  std::vector<double> t;                        // s
-  double rate_hz = 0.0;                         // sample rate: 1 / median step (sample_rate_hz)
-  std::vector<Eigen::Vector3d> gyro;            // rad/s, IMU axes
-  std::vector<Eigen::Vector3d> gyro_rate;       // rad/s^2, IMU axes (estimator::smoothed_derivative)
-  std::vector<Eigen::Vector3d> accel;           // measured specific force, m/s^2, IMU axes
-  std::optional<ReferenceSignals> reference;    // when the series has a reference trajectory
+  std::vector<double> t;                      // s
+  double rate_hz = 0.0;                       // sample rate: 1 / median step (sample_rate_hz)
+  std::vector<Eigen::Vector3d> gyro;          // rad/s, IMU axes
+  std::vector<Eigen::Vector3d> gyro_rate;     // rad/s^2, IMU axes (estimator::smoothed_derivative)
+  std::vector<Eigen::Vector3d> accel;         // measured specific force, m/s^2, IMU axes
+  std::optional<ReferenceSignals> reference;  // when the series has a reference trajectory
   // The rotation taking the mean measured specific force to -z: an IMU -> body rotation up to yaw, for a sensor
   // mounted in any orientation (the full model starts its mounting here). Rotation vector, rad.
   Eigen::Vector3d level_mounting = Eigen::Vector3d::Zero();

@@ -161,8 +161,7 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     const double k = params_.drag_linear[axis];
     const double mu = params_.drag_quadratic[axis];
     // The first axis's update moved the tilt: carry the wind's projection along to first order.
-    const double wind_now =
-        windy_ ? wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt) : 0.0;
+    const double wind_now = windy_ ? wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt) : 0.0;
     out.prior_air_velocity[axis] = x_[axis] - wind_now;
     out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
     if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown

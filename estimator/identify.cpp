@@ -256,7 +256,8 @@ TimeWindow parse_window(std::string_view text, const TimeWindow& span) {
   const std::size_t colon = text.find(':');
   TimeWindow w{0.0, std::numeric_limits<double>::infinity()};
   const bool ok = colon != std::string_view::npos && number(text.substr(0, colon), w.start) &&
-                  (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) && (needs_span || w.start < w.end);
+                  (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) &&
+                  (needs_span || w.start < w.end);
   if (!ok)
     throw std::invalid_argument("bad window \"" + std::string(text) +
                                 "\": expected T0:T1 (or T0: to the end), each in seconds or as a percentage of the "

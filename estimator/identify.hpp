@@ -22,8 +22,8 @@
 
 namespace imubridge::estimator {
 
-enum class ModelKind { kPaper, kFull };           // "paper": eq. (14) per axis; "full": the 3-D model
-enum class Method { kGa, kLm, kGaLm };            // "ga", "lm", "ga+lm"
+enum class ModelKind { kPaper, kFull };  // "paper": eq. (14) per axis; "full": the 3-D model
+enum class Method { kGa, kLm, kGaLm };   // "ga", "lm", "ga+lm"
 // "eq12": eq. (12) (3-D: dead_reckon); "reference"; "filter": the drag-velocity filter running the model, fitted by
 // the filter error method (diagnose/filter_identification.hpp: it needs diagnose's model, so identify() refuses it).
 enum class VelocitySource { kEq12, kReference, kFilter };

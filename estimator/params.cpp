@@ -23,8 +23,8 @@ constexpr double kAngleAgreement = 1e-9;  // rad
 // diagnose's library (diagnose/effects/library.cpp), in its order. The estimator does not link diagnose; a new
 // effect there must be added here, with how the live estimator runs it (docs/effects.md, "Live").
 constexpr std::array<std::string_view, 12> kEffects = {
-    "linear_drag", "quadratic_drag", "accel_bias", "gyro_bias", "thrust",    "time_offset",
-    "accel_scale", "accel_cross",    "lever_arm_z", "vibration", "wind",      "self_consistent_velocity"};
+    "linear_drag", "quadratic_drag", "accel_bias",  "gyro_bias", "thrust", "time_offset",
+    "accel_scale", "accel_cross",    "lever_arm_z", "vibration", "wind",   "self_consistent_velocity"};
 constexpr std::string_view kVibrationRefusal =
     "vibration is a sinusoid whose phase belongs to the identified session's clock; live, vibration is measurement "
     "noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with --lowpass or "
@@ -104,9 +104,8 @@ double number(const json& j, const std::string& path) {
 
 template <int N>
 Eigen::Matrix<double, N, 1> vector(const json& j, const std::string& path) {
-  const bool ok = j.is_array() && j.size() == N && std::all_of(j.begin(), j.end(), [](const json& v) {
-                    return v.is_number();
-                  });
+  const bool ok =
+      j.is_array() && j.size() == N && std::all_of(j.begin(), j.end(), [](const json& v) { return v.is_number(); });
   if (!ok) wrong_type(path, "an array of " + std::to_string(N) + " numbers", j);
   Eigen::Matrix<double, N, 1> out;
   for (int i = 0; i < N; ++i) out[i] = j[static_cast<std::size_t>(i)].template get<double>();

@@ -2,9 +2,9 @@
 // library's effects one at a time while they lower the validation error significantly, and write DIR/report.json
 // and DIR/report.html (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
 // goes to stdout.
-#include <CLI/CLI.hpp>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -133,8 +133,8 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   if (!d.imu_axes.empty()) std::printf("%s\n", d.imu_axes.c_str());
   std::printf("diagnosed %s: %s model, axes", d.session.c_str(), d.model.c_str());
   for (const std::string& a : d.axes) std::printf(" %s", a.c_str());
-  std::printf(", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(),
-               d.train_start, d.train_end, d.validate_start, d.validate_end);
+  std::printf(", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(), d.train_start,
+              d.train_end, d.validate_start, d.validate_end);
   std::printf("base: RMSE train %.4f, validation %.4f m/s^2\n", d.base.rmse_train, d.base.rmse_validation);
   print_params(d.base.base_params);
   print_velocity(d.base);
@@ -142,8 +142,8 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
     const dg::Step& s = d.steps[i];
     std::printf("step %zu: + %s: RMSE train %.4f -> %.4f, validation %.4f -> %.4f m/s^2\n", i + 1,
-                 dg::with_needed(s.effect, s.with).c_str(), s.rmse_train_before, s.fit.rmse_train, s.rmse_validation_before,
-                 s.fit.rmse_validation);
+                dg::with_needed(s.effect, s.with).c_str(), s.rmse_train_before, s.fit.rmse_train,
+                s.rmse_validation_before, s.fit.rmse_validation);
     print_params(s.params);
     print_velocity(s.fit);
     print_fit_flags(s.fit);
@@ -151,11 +151,10 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   if (!d.last_candidates.empty()) {
     const dg::CandidateTrial& best = d.last_candidates.front();
     if (best.skipped.empty() && !best.rejected_by.empty())
-      std::printf("stopped: the best candidate, %s (validation %.4f m/s^2), fails the %s\n",
-                   best.effect.c_str(), best.rmse_validation, best.rejected_by.c_str());
+      std::printf("stopped: the best candidate, %s (validation %.4f m/s^2), fails the %s\n", best.effect.c_str(),
+                  best.rmse_validation, best.rejected_by.c_str());
     else if (!best.skipped.empty())
-      std::printf("stopped: no candidate could be tried (%s: %s)\n", best.effect.c_str(),
-                   best.skipped.c_str());
+      std::printf("stopped: no candidate could be tried (%s: %s)\n", best.effect.c_str(), best.skipped.c_str());
     for (const dg::CandidateTrial& c : d.last_candidates) {
       if (c.skipped.rfind("implausible", 0) == 0)
         std::printf("  refused %s: %s\n", c.effect.c_str(), c.skipped.c_str());
@@ -192,14 +191,14 @@ int run(const DiagnoseCliOptions& o) {
                                  : *options.velocity == dg::VelocitySource::kFilter    ? ReferenceUse::when_present
                                                                                        : ReferenceUse::none;
   const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference,
-                                                       .imu_axes = o.imu_axes});
+      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference, .imu_axes = o.imu_axes});
   if (!options.velocity)
     options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kFilter;
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
   // Progress on a terminal only: a log file or a pipe gets the summary alone.
   const bool show_progress = isatty(STDERR_FILENO) == 1;
-  if (show_progress) options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
+  if (show_progress)
+    options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
   dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
   if (show_progress) TerminalProgress::clear();
   diagnosis.imu_axes = session.axes.description;

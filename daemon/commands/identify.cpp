@@ -21,9 +21,9 @@
 #include "daemon/commands/velocity_print.hpp"
 #include "daemon/daemon.hpp"
 #include "diagnose/filter_identification.hpp"
+#include "estimator/constants.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
-#include "estimator/constants.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
 
@@ -175,15 +175,15 @@ int run(const IdentifyCliOptions& o) {
     throw std::invalid_argument("--hold applies to --model full only");
 
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeries session = pipeline::read_session_series(
-      store, o.session,
-      {.link = o.link,
-       // Read when present in any case: the velocity the model gives is scored against it (the filter's and
-       // eq. (12)'s fits never read it).
-       .reference = o.velocity && options.velocity == est::VelocitySource::kReference
-                        ? pipeline::ReferenceUse::required
-                        : pipeline::ReferenceUse::when_present,
-       .imu_axes = o.imu_axes});
+  const pipeline::SessionSeries session =
+      pipeline::read_session_series(store, o.session,
+                                    {.link = o.link,
+                                     // Read when present in any case: the velocity the model gives is scored against it
+                                     // (the filter's and eq. (12)'s fits never read it).
+                                     .reference = o.velocity && options.velocity == est::VelocitySource::kReference
+                                                      ? pipeline::ReferenceUse::required
+                                                      : pipeline::ReferenceUse::when_present,
+                                     .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   if (!o.velocity)
     options.velocity = session.series.reference ? est::VelocitySource::kReference : est::VelocitySource::kFilter;

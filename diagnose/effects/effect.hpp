@@ -26,7 +26,7 @@
 
 namespace imubridge::diagnose {
 
-enum class BaseModel { kPaper, kFull };         // eq. (14) per axis; the 3-D rigid body and mounting
+enum class BaseModel { kPaper, kFull };  // eq. (14) per axis; the 3-D rigid body and mounting
 // The reference trajectory; integrated from the gyro (eq. 12); or the drag-velocity filter's one-step prediction
 // (the filter error method, docs/identification.md), which runs the model being fitted.
 enum class VelocitySource { kReference, kImu, kFilter };
@@ -65,14 +65,14 @@ struct ModelInputs {
   std::vector<Eigen::Vector3d> velocity;         // body-axis AIR velocity (ground velocity minus wind), m/s
   // body -> NED (reference, or integrated from the gyro); empty with kFilter, whose attitude is its own state
   std::vector<Eigen::Quaterniond> attitude;
-  std::vector<double> thrust;                    // T, m/s^2: g, or the measured body-z reading (measured_thrust)
+  std::vector<double> thrust;  // T, m/s^2: g, or the measured body-z reading (measured_thrust)
 };
 
 // What stage 5 sees: the inputs and the base model's current geometry, over samples [first, first + count).
 struct PredictionContext {
   const ModelSetup& setup;
   const ModelInputs& inputs;
-  std::vector<estimator::PaperAxisParams> paper;  // paper base: per diagnosed axis
+  std::vector<estimator::PaperAxisParams> paper;              // paper base: per diagnosed axis
   Eigen::Matrix3d imu_to_body = Eigen::Matrix3d::Identity();  // full base: R_bs
   std::size_t first = 0, count = 0;
 };
@@ -83,7 +83,7 @@ using AxisValues = std::vector<std::vector<double>>;
 // For effects whose starting values come from the data: the current model's training residual.
 struct StartContext {
   const ModelSetup& setup;
-  std::span<const double> t;  // training window's times
+  std::span<const double> t;   // training window's times
   const AxisValues& residual;  // training residual per diagnosed axis
 };
 

@@ -12,8 +12,8 @@ class SelfConsistentVelocity final : public Effect {
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     if (setup.velocity == VelocitySource::kReference) return "the velocity comes from the reference trajectory";
     if (setup.velocity == VelocitySource::kFilter) return "the filter's velocity has the drag in its dynamics already";
-    const bool drag = setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") ||
-                      contains(in_model, "quadratic_drag");
+    const bool drag =
+        setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
     if (!drag) return "the model has no drag law to integrate yet";
     return std::nullopt;
   }

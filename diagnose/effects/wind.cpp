@@ -8,8 +8,8 @@ class Wind final : public Effect {
  public:
   std::string_view name() const override { return "wind"; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
-    const bool drag = setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") ||
-                      contains(in_model, "quadratic_drag");
+    const bool drag =
+        setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
     if (!drag && needs(setup, in_model).empty()) return "wind acts through drag, and the model has none yet";
     return std::nullopt;
   }
