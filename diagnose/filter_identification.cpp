@@ -18,12 +18,6 @@ namespace {
 
 using estimator::FullBlock;
 
-Range range_of(const Signals& s, const estimator::TimeWindow& w) {
-  const auto first = std::lower_bound(s.t.begin(), s.t.end(), w.start);
-  const auto last = std::lower_bound(first, s.t.end(), w.end);
-  return {static_cast<std::size_t>(first - s.t.begin()), static_cast<std::size_t>(last - first)};
-}
-
 // identify's name for a parameter from its PARAMS.json path: below the group ("lever_arm.0", "drag_linear.1") for the
 // 3-D model, the last part ("r", "mu") for a paper axis. Its summary prints these and its warnings name them.
 std::string identify_name(const std::string& path) {

@@ -129,6 +129,12 @@ estimator::DeadReckoning dead_reckon_with_drag(std::span<const double> t, std::s
 
 }  // namespace
 
+Range range_of(const Signals& s, const estimator::TimeWindow& w) {
+  const auto first = std::lower_bound(s.t.begin(), s.t.end(), w.start);
+  const auto last = std::lower_bound(first, s.t.end(), w.end);
+  return {static_cast<std::size_t>(first - s.t.begin()), static_cast<std::size_t>(last - first)};
+}
+
 AxisValues Evaluation::residual() const {
   AxisValues out = measured;
   for (std::size_t i = 0; i < out.size(); ++i) {

@@ -15,6 +15,7 @@
 
 #include "diagnose/effects/effect.hpp"
 #include "diagnose/signals.hpp"
+#include "estimator/params.hpp"
 
 namespace imubridge::diagnose {
 
@@ -22,6 +23,9 @@ namespace imubridge::diagnose {
 struct Range {
   std::size_t first = 0, count = 0;
 };
+
+// The samples of `signals` inside the window.
+Range range_of(const Signals& signals, const estimator::TimeWindow& window);
 
 // Measured and predicted specific force in the residual's frame (paper: sensor axes; full: levelled body axes),
 // per diagnosed axis; the residual is measured - predicted.

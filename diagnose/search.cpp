@@ -30,12 +30,6 @@ namespace {
 // sample count looks that far.
 constexpr double kCorrelationSpanS = 1.0;
 
-Range range_of(const Signals& s, const estimator::TimeWindow& w) {
-  const auto first = std::lower_bound(s.t.begin(), s.t.end(), w.start);
-  const auto last = std::lower_bound(first, s.t.end(), w.end);
-  return {static_cast<std::size_t>(first - s.t.begin()), static_cast<std::size_t>(last - first)};
-}
-
 double sum_of_squares(const AxisValues& residual) {
   double sum = 0.0;
   for (const std::vector<double>& axis : residual) {
@@ -303,6 +297,10 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   out.train_start = windows.train.start, out.train_end = windows.train.end;
   out.validate_start = windows.validate.start, out.validate_end = windows.validate.end;
   out.significance_rule = describe_rule(options);
+  if (setup.velocity == VelocitySource::kImu) {
+    if (auto drift = estimator::eq12_drift_warning(series, signals.level_mounting, windows.train))
+      out.warnings.push_back(std::move(*drift));
+  }
 
   const auto started = std::chrono::steady_clock::now();
   const auto report_progress = [&](int step, std::string_view candidate, bool finished, std::size_t done,

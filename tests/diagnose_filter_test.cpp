@@ -5,8 +5,10 @@
 // those the method was developed on (scripts/effects-sweep runs more).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -81,9 +83,27 @@ TEST(FromTheImuAlone, FlightsWithoutAnEffectAddOnlyWhatTheyHave) {
   for (const std::string& effect : chosen(control("agile, full"))) EXPECT_EQ(effect, "quadratic_drag");
 }
 
+const CandidateTrial& trial(const std::vector<CandidateTrial>& trials, const std::string& effect) {
+  const auto it = std::find_if(trials.begin(), trials.end(), [&](const auto& t) { return t.effect == effect; });
+  if (it == trials.end()) throw std::invalid_argument("no candidate " + effect);
+  return *it;
+}
+
 TEST(FromTheImuAlone, LinearDrag) {
   const Diagnosis d = diagnose({.sim_effects = {"linear_drag=1", "quadratic_drag=0"}});
   expect_found_first(d, control("full"), "linear_drag");
+  // The wind needs a quadratic drag (Effect::needs). At the first step a single candidate passes, so the compound
+  // one is not fitted; at the second none does, so it is, with the drag it needs, and fails the rules.
+  ASSERT_FALSE(d.steps.empty());
+  const CandidateTrial& first = trial(d.steps.front().candidates, "wind");
+  EXPECT_EQ(first.with, std::vector<std::string>{"quadratic_drag"});
+  EXPECT_NE(first.skipped.find("compound"), std::string::npos) << first.skipped;
+  ASSERT_EQ(d.steps.size(), 1u);
+  const CandidateTrial& second = trial(d.last_candidates, "wind");
+  EXPECT_EQ(second.with, std::vector<std::string>{"quadratic_drag"});
+  EXPECT_TRUE(second.skipped.empty()) << second.skipped;
+  EXPECT_FALSE(second.significant);
+  EXPECT_FALSE(second.rejected_by.empty());
 }
 
 TEST(FromTheImuAlone, QuadraticDrag) {
