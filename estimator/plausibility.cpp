@@ -43,6 +43,22 @@ const char* const kAxis[] = {"x", "y", "z"};
 
 }  // namespace
 
+std::vector<std::string> negligible_drag(const FullModelParams& p) {
+  std::vector<std::string> out;
+  for (int axis = 0; axis < 2; ++axis) {
+    const double k = p.drag_linear[axis], mu = p.drag_quadratic[axis];
+    const double force = k * kBriskSpeed + mu * kBriskSpeed * kBriskSpeed;
+    if (force >= kDragVisible) continue;
+    char line[320];
+    std::snprintf(line, sizeof line,
+                  "no usable drag on %c: k = %.3g 1/s and mu = %.3g 1/m give %.3g m/s^2 at %g m/s, below the %g m/s^2 "
+                  "an accelerometer reads through its noise: the estimator has no usable velocity to give on that axis",
+                  "xy"[axis], k, mu, force, kBriskSpeed, kDragVisible);
+    out.emplace_back(line);
+  }
+  return out;
+}
+
 std::vector<Implausibility> check_plausibility(const FullModelParams& p, const PlausibilityLimits& limits) {
   std::vector<Implausibility> out;
   check(out, limits, "lever_arm", "lever arm |r|", p.lever_arm.norm());

@@ -40,6 +40,13 @@ struct Implausibility {
 // Every limit the model's values exceed (an empty list: plausible).
 std::vector<Implausibility> check_plausibility(const FullModelParams& params, const PlausibilityLimits& limits = {});
 
+// A drag too small to see: at kBriskSpeed it gives less than kDragVisible of specific force, below what an
+// accelerometer reads through its noise, so the velocity inverted from it is noise. One line per such horizontal axis
+// ("no usable drag on x: ..."); empty when both axes have one. A fit on eq. (12)'s drifting velocity ends here.
+inline constexpr double kBriskSpeed = 5.0;     // m/s
+inline constexpr double kDragVisible = 0.1;    // m/s^2, the drag-velocity filter's default accelerometer noise
+std::vector<std::string> negligible_drag(const FullModelParams& params);
+
 // The limits' names and values, in the table's order (for --help and the docs).
 std::vector<std::pair<std::string, double>> limit_table(const PlausibilityLimits& limits = {});
 

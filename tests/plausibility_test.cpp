@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 namespace imubridge::estimator {
 namespace {
@@ -67,6 +69,17 @@ TEST(Plausibility, TheTableListsEveryLimit) {
   ASSERT_EQ(table.size(), 7u);
   EXPECT_EQ(table.front().first, "lever_arm");
   EXPECT_DOUBLE_EQ(table.front().second, 0.5);
+}
+
+// A drag fitted to nothing (eq. (12)'s drifting velocity takes mu to ~1e-6) is said, axis by axis.
+TEST(Plausibility, ADragTooSmallToSeeIsSaid) {
+  FullModelParams p;
+  p.drag_quadratic = {1e-6, 0.04};  // the second: the paper's mu, 1 m/s^2 at 5 m/s
+  const std::vector<std::string> lines = negligible_drag(p);
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_NE(lines.front().find("no usable drag on x"), std::string::npos) << lines.front();
+  p.drag_linear.x() = 0.3;  // 1.5 m/s^2 at 5 m/s
+  EXPECT_TRUE(negligible_drag(p).empty());
 }
 
 }  // namespace

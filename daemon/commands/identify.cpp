@@ -216,6 +216,7 @@ int run(const IdentifyCliOptions& o) {
   }
   for (const est::Implausibility& i : est::check_plausibility(result.params.full, limits))
     std::printf("warning: implausible: %s\n", i.message.c_str());
+  for (const std::string& line : est::negligible_drag(result.params.full)) std::printf("warning: %s\n", line.c_str());
   return 0;
 }
 
