@@ -113,27 +113,18 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
   result.params.identification.method = "filter-error";
   result.params.effects.clear();  // identify's blocks, not effects a diagnosis added
 
-  // The PARAMS.json path of every parameter, for identify's names.
-  std::vector<std::string> paths(model.parameters().size());
+  // identify names each parameter by its PARAMS.json path; the filter's process noise, which has none, by its own.
+  std::vector<std::string> paths = parameter_paths(model);
   for (std::size_t i = 0; i < paths.size(); ++i) {
-    const Parameter& p = model.parameters()[i];
-    paths[i] = full && i < model.base_size() ? "full." + p.name : p.name;
+    if (paths[i].empty()) paths[i] = "full." + model.parameters()[i].name;
   }
   if (full) {
-    for (std::size_t e = 0; e < effects.size(); ++e) {
-      const std::string block = effects[e]->name() == "linear_drag"      ? "drag_linear"
-                                : effects[e]->name() == "quadratic_drag" ? "drag_quadratic"
-                                                                         : "accel_bias";
-      for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e) + model.effect_size(e); ++i)
-        paths[i] = "full." + block + "." + std::to_string(model.parameters()[i].name.back() - 'x');
-    }
     std::vector<std::size_t> all(paths.size());
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
     result.fits.push_back(report_of(fit, all, paths, "full"));
   } else {
     for (std::size_t a = 0; a < setup.axes.size(); ++a) {
       const std::vector<std::size_t> axis{4 * a, 4 * a + 1, 4 * a + 2, 4 * a + 3};
-      for (std::size_t i : axis) paths[i] = "paper." + model.parameters()[i].name;
       result.fits.push_back(report_of(fit, axis, paths, setup.axes[a] == 0 ? "paper.x" : "paper.y"));
     }
   }

@@ -25,27 +25,71 @@ double yaw_of(const Eigen::Quaterniond& q) {
 
 }  // namespace
 
-estimator::ModelParams live_params(const Model& model, std::span<const double> p, std::span<const double> std_errors) {
+std::vector<std::string> parameter_paths(const Model& model) {
   const ModelSetup& setup = model.setup();
   const std::vector<Parameter>& parameters = model.parameters();
-  estimator::ModelParams out;
-  estimator::FullModelParams& full = out.full;
   std::vector<std::string> paths(parameters.size());
-
   if (setup.base == BaseModel::kFull) {
     for (int i = 0; i < 3; ++i) {
-      full.lever_arm[i] = p[i];
-      full.mounting[i] = p[3 + i];
       paths[i] = "full.lever_arm." + std::to_string(i);
       paths[3 + i] = "full.mounting." + std::to_string(i);
     }
   } else {
     for (std::size_t i = 0; i < setup.axes.size(); ++i) {
-      const estimator::PaperAxisParams axis{p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]};
       const std::string prefix = setup.axes[i] == 0 ? "paper.x." : "paper.y.";
-      (setup.axes[i] == 0 ? out.paper_x : out.paper_y) = axis;
       paths[4 * i] = prefix + "r", paths[4 * i + 1] = prefix + "beta", paths[4 * i + 2] = prefix + "alpha";
       paths[4 * i + 3] = prefix + "mu";
+    }
+  }
+  for (std::size_t e = 0; e < model.effects().size(); ++e) {
+    const std::string name(model.effects()[e]->name());
+    for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e) + model.effect_size(e); ++i) {
+      const std::string& pname = parameters[i].name;
+      const auto per_axis = [&](const char* block) {
+        return "full." + std::string(block) + "." + std::to_string(axis_of(pname));
+      };
+      if (name == "linear_drag") {
+        paths[i] = per_axis("drag_linear");
+      } else if (name == "quadratic_drag") {
+        paths[i] = per_axis("drag_quadratic");
+      } else if (name == "wind") {
+        paths[i] = std::string("full.wind.") + (pname == "north" ? "0" : "1");
+      } else if (name == "accel_bias") {
+        paths[i] = per_axis("accel_bias");
+      } else if (name == "accel_scale") {
+        paths[i] = per_axis("accel_scale");
+      } else if (name == "accel_cross") {  // "cross.xy": axis x reads a fraction of axis y
+        paths[i] =
+            "full.accel_cross." + std::to_string(pname[pname.size() - 2] - 'x') + std::to_string(pname.back() - 'x');
+      } else if (name == "gyro_bias") {
+        paths[i] = per_axis("gyro_bias");
+      } else if (name == "time_offset") {
+        paths[i] = "full.time_offset";
+      } else {
+        // lever_arm_z (the 3-D lever arm has its z), vibration (refused live, with its reason, when PARAMS.json is
+        // read): kept under the effect's own name.
+        paths[i] = "effects." + name + "." + pname;
+      }
+    }
+  }
+  return paths;
+}
+
+estimator::ModelParams live_params(const Model& model, std::span<const double> p, std::span<const double> std_errors) {
+  const ModelSetup& setup = model.setup();
+  const std::vector<Parameter>& parameters = model.parameters();
+  estimator::ModelParams out;
+  estimator::FullModelParams& full = out.full;
+
+  if (setup.base == BaseModel::kFull) {
+    for (int i = 0; i < 3; ++i) {
+      full.lever_arm[i] = p[i];
+      full.mounting[i] = p[3 + i];
+    }
+  } else {
+    for (std::size_t i = 0; i < setup.axes.size(); ++i) {
+      const estimator::PaperAxisParams axis{p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]};
+      (setup.axes[i] == 0 ? out.paper_x : out.paper_y) = axis;
     }
     full = estimator::full_from_paper(out.paper_x, out.paper_y);
   }
@@ -63,34 +107,22 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
       const double v = p[i];
       if (name == "linear_drag") {
         full.drag_linear[axis_of(pname)] += v;
-        paths[i] = "full.drag_linear." + std::to_string(axis_of(pname));
       } else if (name == "quadratic_drag") {
         full.drag_quadratic[axis_of(pname)] += v;
-        paths[i] = "full.drag_quadratic." + std::to_string(axis_of(pname));
       } else if (name == "wind") {
         full.wind[pname == "north" ? 0 : 1] = v;
-        paths[i] = std::string("full.wind.") + (pname == "north" ? "0" : "1");
       } else if (name == "accel_bias") {
         body_bias[axis_of(pname)] = v;
-        paths[i] = "full.accel_bias." + std::to_string(axis_of(pname));
       } else if (name == "accel_scale") {
         full.accel_scale[axis_of(pname)] = v;
-        paths[i] = "full.accel_scale." + std::to_string(axis_of(pname));
       } else if (name == "accel_cross") {  // "cross.xy": axis x reads a fraction of axis y
-        const int a = pname[pname.size() - 2] - 'x', b = pname.back() - 'x';
-        full.accel_cross(a, b) = v;
-        paths[i] = "full.accel_cross." + std::to_string(a) + std::to_string(b);
+        full.accel_cross(pname[pname.size() - 2] - 'x', pname.back() - 'x') = v;
       } else if (name == "gyro_bias") {
         full.gyro_bias[axis_of(pname)] = v;
-        paths[i] = "full.gyro_bias." + std::to_string(axis_of(pname));
       } else if (name == "time_offset") {
         full.time_offset = v;
-        paths[i] = "full.time_offset";
-      } else {
-        // lever_arm_z (the 3-D lever arm has its z), vibration (refused live, with its reason, when PARAMS.json is
-        // read): kept under the effect's own name.
-        paths[i] = "effects." + name + "." + pname;
       }
+      // lever_arm_z and vibration have no place in the estimator's parameters (parameter_paths says where they go).
     }
     if (name == "accel_bias") full.accel_bias += imu_to_body.transpose() * body_bias;
     // The world the wind was fitted in: the model's attitude at the first sample. The filter's heading starts at 0
@@ -101,8 +133,11 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
     }
   }
 
-  for (std::size_t i = 0; i < paths.size() && i < std_errors.size(); ++i) {
-    if (!paths[i].empty() && std::isfinite(std_errors[i])) out.identification.std_errors[paths[i]] = std_errors[i];
+  if (!std_errors.empty()) {
+    const std::vector<std::string> paths = parameter_paths(model);
+    for (std::size_t i = 0; i < paths.size() && i < std_errors.size(); ++i) {
+      if (!paths[i].empty() && std::isfinite(std_errors[i])) out.identification.std_errors[paths[i]] = std_errors[i];
+    }
   }
   return out;
 }

@@ -11,6 +11,11 @@
 
 namespace imubridge::diagnose {
 
+// The PARAMS.json path of each of the model's parameters ("full.lever_arm.0", "paper.x.mu", "full.drag_linear.1",
+// "effects.vibration.f"), under which live_params records its standard error; empty for the one PARAMS.json keeps
+// otherwise (the filter's process noise, fitted as its log10: identification.process_noise).
+std::vector<std::string> parameter_paths(const Model& model);
+
 // The parameters of `model` at `values`; standard errors, when given, go into identification.std_errors under the
 // same path as the value they belong to.
 estimator::ModelParams live_params(const Model& model, std::span<const double> values,

@@ -516,6 +516,15 @@ struct ModelCost {
   }
 };
 
+// The model's residuals on `range` as one Ceres cost with a numeric Jacobian by `method`.
+template <ceres::NumericDiffMethodType method>
+ceres::CostFunction* numeric_cost(const Model& model, Range range, std::size_t parameters, std::size_t residuals) {
+  auto* cost = new ceres::DynamicNumericDiffCostFunction<ModelCost, method>(new ModelCost{&model, range});
+  cost->AddParameterBlock(static_cast<int>(parameters));
+  cost->SetNumResiduals(static_cast<int>(residuals));
+  return cost;
+}
+
 class RecordCost final : public ceres::IterationCallback {
  public:
   explicit RecordCost(std::vector<double>& costs) : costs_(costs) {}
@@ -545,18 +554,9 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   // Central differences, except where every evaluation runs the filter over the flight: forward ones there halve
   // the cost, and the filter's output is smooth in the parameters, so their first-order error stays far below the
   // step LM takes.
-  ceres::CostFunction* cost = nullptr;
-  if (model.filter_runs()) {
-    auto* forward = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::FORWARD>(new ModelCost{&model, range});
-    forward->AddParameterBlock(static_cast<int>(params.size()));
-    forward->SetNumResiduals(static_cast<int>(residual_count));
-    cost = forward;
-  } else {
-    auto* central = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::CENTRAL>(new ModelCost{&model, range});
-    central->AddParameterBlock(static_cast<int>(params.size()));
-    central->SetNumResiduals(static_cast<int>(residual_count));
-    cost = central;
-  }
+  ceres::CostFunction* cost = model.filter_runs()
+                                  ? numeric_cost<ceres::FORWARD>(model, range, params.size(), residual_count)
+                                  : numeric_cost<ceres::CENTRAL>(model, range, params.size(), residual_count);
   problem.AddResidualBlock(cost, nullptr, x);
   std::vector<int> held;
   for (std::size_t i = 0; i < params.size(); ++i) {

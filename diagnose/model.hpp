@@ -1,9 +1,10 @@
 #pragma once
 // The model `imubridge diagnose` fits: a base model (the paper's eq. 14 per axis, or the 3-D rigid body and
 // mounting of docs/model.md) plus a list of effects (effects/effect.hpp), evaluated in the effects' stages, and its
-// generic fit: Levenberg-Marquardt (Ceres) on every free parameter with a central numeric-difference Jacobian,
-// because effects such as a gyro bias or the self-consistent velocity change the velocity integrated over the whole
-// flight. Deterministic and single-threaded.
+// generic fit: Levenberg-Marquardt (Ceres) on every free parameter with a numeric-difference Jacobian (central;
+// forward when every evaluation runs the drag-velocity filter), because effects such as a gyro bias or the
+// self-consistent velocity change the velocity integrated over the whole flight. Deterministic; one fit runs on one
+// thread, and a Model serves one thread at a time (the search gives each thread models of its own).
 #include <Eigen/Core>
 #include <cstddef>
 #include <list>
@@ -81,8 +82,8 @@ class Model {
  private:
   // Stages 1-3 for samples [0, until) (kFilter runs its filter only that far; the other sources fill everything).
   ModelInputs compute_inputs(std::span<const double> p, std::size_t until) const;
-  // kFilter: the drag-velocity filter run with the model at p over the whole series, its one-step-ahead air velocity
-  // per sample (so that the residual is the filter's innovation).
+  // kFilter: the drag-velocity filter run with the model at p from the series' first sample to `until`, on block
+  // means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation).
   std::vector<Eigen::Vector3d> filter_velocity(std::span<const double> p, std::size_t until) const;
   // The inputs for p, recomputed only when a parameter they depend on changed: most of a numeric Jacobian's
   // evaluations perturb parameters that act after stage 3. Not thread-safe (the fit is single-threaded).

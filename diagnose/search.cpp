@@ -257,11 +257,6 @@ double use_filter(ModelSetup& setup, const Signals& signals, const DiagnoseOptio
   return setup.lowpass_hz;
 }
 
-std::size_t fitting_threads(const DiagnoseOptions& options) {
-  if (options.threads > 0) return static_cast<std::size_t>(options.threads);
-  return std::max(1u, std::thread::hardware_concurrency());
-}
-
 Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
   DiagnoseOptions options = requested;
   if (options.lowpass_hz != 0.0 && !(options.lowpass_hz > 0.0))
@@ -458,7 +453,8 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
         }
       };
-      const std::size_t threads = std::min<std::size_t>(fitting_threads(options), untried.size());
+      const std::size_t threads =
+          std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), untried.size());
       std::vector<std::thread> pool;
       for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
       work();

@@ -50,8 +50,6 @@ struct DiagnoseOptions {
   std::string session;  // how the report names the data
   // A candidate whose fitted values exceed these is refused, whatever its gain.
   estimator::PlausibilityLimits limits;
-  // Candidates fitted at once; 0: one per core. The result does not depend on it.
-  int threads = 0;
   // Called as the search moves, from the fitting threads (so it must be thread-safe); may be empty.
   std::function<void(const DiagnoseProgress&)> progress;
 };

@@ -25,7 +25,7 @@ constexpr std::uint64_t kSeed = 21;
 const estimator::TimeWindow kTrain{0.0, 30.0}, kValidate{30.0, 50.0};
 
 struct Flight {
-  std::vector<std::string> sim_effects;
+  std::vector<std::string> sim_effects{};
   BaseModel model = BaseModel::kFull;
   std::string scenario = "paper";
   int max_steps = 2;
