@@ -149,6 +149,8 @@ TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {
   expect_error(identify("--session 1 --method ga --population 1" + p), 2, "population");
   expect_error(identify("--session 1 --train 0:0.01" + p), 2, "at least 4 samples");
   expect_error(identify("--session 2 --velocity reference" + p), 2, "no reference trajectory");
+  // Without a reference the velocity defaults to the filter's, which the GA cannot fit: refused, not run by LM.
+  expect_error(identify("--session 2 --method ga" + p), 2, "--velocity eq12");
   expect_error(run_imubridge("identify --db " + out("missing.db") + " --session 1" + p), 1, "missing.db");
   EXPECT_FALSE(fs::exists(out("bad.json")));
 

@@ -167,8 +167,6 @@ int run(const IdentifyCliOptions& o) {
   options.method = est::parse_method(o.method);
   if (o.velocity) options.velocity = est::parse_velocity(*o.velocity);
   options.ga = o.ga;
-  if (o.velocity && options.velocity == est::VelocitySource::kFilter && options.method != est::Method::kLm)
-    throw std::invalid_argument("--velocity filter fits by LM only (the GA would run the filter for every individual)");
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   options.hold = parse_hold(o.hold);
   if (!o.hold.empty() && options.model != est::ModelKind::kFull)
@@ -187,6 +185,11 @@ int run(const IdentifyCliOptions& o) {
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   if (!o.velocity)
     options.velocity = session.series.reference ? est::VelocitySource::kReference : est::VelocitySource::kFilter;
+  if (options.velocity == est::VelocitySource::kFilter && options.method != est::Method::kLm)
+    throw std::invalid_argument(
+        o.velocity ? "--velocity filter fits by LM only (the GA would run the filter for every individual)"
+                   : "session has no reference, so the velocity is the filter's, which fits by LM only (the GA would "
+                     "run the filter for every individual); --velocity eq12 runs the paper's GA on the IMU alone");
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
   const est::IdentifyResult result = options.velocity == est::VelocitySource::kFilter
                                          ? diagnose::identify_by_filter_error(session.series, options)
