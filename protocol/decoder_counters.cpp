@@ -14,6 +14,7 @@ DecoderCounters& DecoderCounters::operator+=(const DecoderCounters& other) {
   frames_lost += other.frames_lost;
   duplicates += other.duplicates;
   unsupported += other.unsupported;
+  unverified += other.unverified;
   return *this;
 }
 
@@ -21,7 +22,8 @@ void to_json(nlohmann::json& j, const DecoderCounters& c) {
   j = nlohmann::json{
       {"bytes_in", c.bytes_in},       {"frames_out", c.frames_out},           {"crc_failures", c.crc_failures},
       {"resyncs", c.resyncs},         {"bytes_discarded", c.bytes_discarded}, {"sequence_gaps", c.sequence_gaps},
-      {"frames_lost", c.frames_lost}, {"duplicates", c.duplicates},           {"unsupported", c.unsupported}};
+      {"frames_lost", c.frames_lost}, {"duplicates", c.duplicates},           {"unsupported", c.unsupported},
+      {"unverified", c.unverified}};
 }
 
 }  // namespace imubridge::protocol

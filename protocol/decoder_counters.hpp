@@ -18,6 +18,7 @@ struct DecoderCounters {
   std::uint64_t frames_lost = 0;      // frames missing according to the sequence numbers
   std::uint64_t duplicates = 0;       // valid frames dropped for repeating the sequence number just before them
   std::uint64_t unsupported = 0;      // valid frames of a type this decoder does not interpret (counted, not errors)
+  std::uint64_t unverified = 0;       // candidates that cannot be checked, so no frames (MAVLink: an unknown id)
 
   DecoderCounters& operator+=(const DecoderCounters& other);
   friend bool operator==(const DecoderCounters&, const DecoderCounters&) = default;

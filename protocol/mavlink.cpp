@@ -14,8 +14,6 @@
 namespace imubridge::protocol::mavlink {
 namespace {
 
-bool is_stx(std::uint8_t byte) { return byte == kStxV1 || byte == kStxV2; }
-
 // A candidate's header fields; the bytes must hold the whole header.
 struct Header {
   std::uint8_t version, len, incompat_flags, seq, sysid, compid;
@@ -131,21 +129,20 @@ void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Message>& ou
 
 void Decoder::finish(std::vector<Message>& out) { scanner_.finish(out); }
 
-// Each verdict depends on the candidate's bytes and on `at_end` only, so the chunking of the stream cannot change it.
-inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool at_end) const {
+// Each verdict depends on the candidate's bytes only, so the chunking of the stream cannot change it.
+inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /*at_end*/) const {
   if (c.size() < (c[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {Verdict::need_more};
   const Header h = Header::read(c.data());
   if (h.incompat_flags & ~kIncompatSigned) return {Verdict::false_start};  // a feature we cannot parse
+  const MessageSpec* spec = message_spec(h.msgid);
+  if (!spec) return {Verdict::unverified};  // without its CRC_EXTRA no CRC can be checked
+  // A MAVLink 1 frame carries the base fields, perhaps the extensions, never more. MAVLink 2 lengths are not
+  // checked: a newer sender may append extensions the table does not know yet, and its frames verify all the same.
+  if (h.version == 1 && (h.len < spec->min_length || h.len > spec->max_length)) return {Verdict::false_start};
   const std::size_t size = h.frame_size();
-  const std::optional<std::uint8_t> extra = crc_extra(h.msgid);
-  if (!extra) {
-    // Without a CRC_EXTRA nothing can be checked: trust the length only if the next frame starts right after it.
-    if (c.size() > size) return {is_stx(c[size]) ? Verdict::frame : Verdict::false_start, size};
-    return {c.size() == size && at_end ? Verdict::frame : Verdict::need_more, size};
-  }
   if (c.size() < size) return {Verdict::need_more};
   const std::size_t crc_at = h.size + h.len;
-  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast(c.subspan(1, crc_at - 1)), *extra);
+  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast(c.subspan(1, crc_at - 1)), spec->crc_extra);
   return {crc == load_le<std::uint16_t>(&c[crc_at]) ? Verdict::frame : Verdict::bad_crc, size};
 }
 

@@ -1,6 +1,6 @@
 #pragma once
 // MAVLink v1 and v2 framing: a streaming decoder, an encoder, and the way from a message to the pipeline's Sample.
-// Framing, CRC_EXTRA, the rule for unknown ids and the conversions: docs/protocol.md, section "MAVLink".
+// Framing, CRC_EXTRA, what is verified and the conversions: docs/protocol.md, section "MAVLink".
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -24,7 +24,8 @@ inline constexpr std::size_t kHeaderSizeV1 = 6, kHeaderSizeV2 = 10;  // STX incl
 inline constexpr std::size_t kCrcSize = 2, kSignatureSize = 13;
 inline constexpr std::size_t kMaxFrameSize = kHeaderSizeV2 + 255 + kCrcSize + kSignatureSize;
 
-// One frame that passed every check, whatever its message id.
+// One frame that passed every check: its id is in the dialects protocol/mavlink_message_specs.cpp knows and its CRC
+// verified.
 struct Message {
   std::uint8_t version = 2;  // 1 or 2
   std::uint8_t seq = 0, sysid = 0, compid = 0;
@@ -49,7 +50,7 @@ Message make_message(std::uint32_t msgid, std::span<const std::uint8_t> payload,
 Message make_message(const Decoded& message, const FrameOptions& options);
 
 // Appends `m` as a frame. Its CRC takes the CRC_EXTRA of m.msgid, or 0 for an id without one (which no receiver
-// can check anyway).
+// can check anyway: Decoder counts such a frame as unverified).
 void encode(const Message& m, std::vector<std::uint8_t>& out);
 
 inline std::optional<Decoded> decode(const Message& m) {
@@ -58,13 +59,13 @@ inline std::optional<Decoded> decode(const Message& m) {
 
 // Streaming decoder for one link: frames come out in stream order whatever the chunking. A candidate that fails
 // any check is a false start and the search resumes at the byte after its STX, so a frame that begins inside
-// rejected bytes is still found (protocol/stream_scanner.hpp). A frame that repeats the sequence number of the one
-// before it from the same component is a retransmission and is dropped.
+// rejected bytes is still found (protocol/stream_scanner.hpp). So does a candidate whose id has no CRC_EXTRA, which
+// cannot be verified: it is counted as unverified and emits nothing. A frame that repeats the sequence number of
+// the one before it from the same component is a retransmission and is dropped.
 class Decoder {
  public:
   void feed(std::span<const std::uint8_t> chunk, std::vector<Message>& out);
-  // End of stream: a frame with an unknown id that ends exactly here is emitted; a cut-off candidate is a false
-  // start, and the search goes on through the bytes after its STX.
+  // End of stream: a cut-off candidate is a false start, and the search goes on through the bytes after its STX.
   void finish(std::vector<Message>& out);
   const DecoderCounters& counters() const { return scanner_.counters(); }
 
@@ -72,7 +73,7 @@ class Decoder {
   // What is particular to MAVLink; the rest of decoding is StreamScanner's.
   struct Framing {
     using Finder = StartFinder<kStxV1, kStxV2>;
-    static constexpr std::size_t kMaxCandidate = kMaxFrameSize + 1;  // an unknown id looks one byte past its end
+    static constexpr std::size_t kMaxCandidate = kMaxFrameSize;
 
     Judgement judge(std::span<const std::uint8_t> candidate, bool at_end) const;
     bool take(std::span<const std::uint8_t> frame, std::vector<Message>& out, DecoderCounters& counters);

@@ -11,7 +11,21 @@
 
 namespace imubridge::protocol::mavlink {
 
-// The CRC_EXTRA byte of a common.xml (or minimal.xml) message, or nothing for an id this table does not know.
+// What a message's XML definition tells a receiver checking its frames: the CRC_EXTRA that ends its CRC, and its
+// payload length with the base fields only (what MAVLink 1 senders send) and with the extensions too.
+struct MessageSpec {
+  std::uint32_t id;
+  std::uint8_t crc_extra;
+  std::uint8_t min_length, max_length;
+  std::string_view name;
+};
+
+// Every message of the common, ardupilotmega and development dialects and of the dialects they include, sorted by
+// id: protocol/mavlink_message_specs.cpp, generated from MAVLink's XML by scripts/generate-mavlink-crc-extra.
+std::span<const MessageSpec> message_specs();
+// The spec of `msgid`, or nullptr for an id outside those dialects: its frames cannot be verified.
+const MessageSpec* message_spec(std::uint32_t msgid);
+// The CRC_EXTRA of `msgid`, or nothing for an id outside those dialects.
 std::optional<std::uint8_t> crc_extra(std::uint32_t msgid);
 
 // Each message lists its fields in wire order through for_each_field(m, f), which calls f(name, field): MAVLink

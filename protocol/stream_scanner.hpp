@@ -22,6 +22,7 @@ enum class Verdict {
   noise,        // no candidate after all (e.g. the second sync byte is wrong): the start byte is noise
   false_start,  // rejected by its header, length or escaping
   bad_crc,      // rejected by its CRC or checksum (a false start too)
+  unverified,   // nothing can check it (e.g. no CRC_EXTRA for its id): no frame, but no evidence of noise either
   frame,        // valid
 };
 
@@ -69,7 +70,8 @@ class StartFinder {
 //   bool take(std::span<const std::uint8_t> frame, Out& out, DecoderCounters& counters);
 //       a frame judge() just found valid: appends it to `out` and returns true, or returns false to drop it (a
 //       duplicate, or for imubridge an unknown type), whose bytes then count as discarded.
-// The scanner counts bytes_in, frames_out, crc_failures, resyncs and bytes_discarded; take() counts the rest.
+// The scanner counts bytes_in, frames_out, crc_failures, resyncs, unverified and bytes_discarded; take() counts the
+// rest.
 // Define judge() and take() `inline` in the protocol's .cpp: they run once per candidate and per frame, and a call
 // each time costs about a quarter of the decoding time.
 template <typename Protocol>
@@ -140,9 +142,11 @@ class StreamScanner {
         continue;
       }
       // The resync rule: a rejected candidate gives up only its start byte, and the search resumes right after it,
-      // so a frame that begins inside the rejected bytes is still found.
+      // so a frame that begins inside the rejected bytes is still found. An unverifiable candidate is no exception:
+      // trusting its length would let noise that looks like one hide the frames it covers.
       counters_.crc_failures += verdict == Verdict::bad_crc;
-      counters_.resyncs += verdict != Verdict::noise;
+      counters_.unverified += verdict == Verdict::unverified;
+      counters_.resyncs += verdict == Verdict::false_start || verdict == Verdict::bad_crc;
       ++counters_.bytes_discarded;
       ++p;
     }

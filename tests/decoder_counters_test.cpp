@@ -17,11 +17,13 @@ constexpr DecoderCounters kSome{.bytes_in = 1,
                                 .sequence_gaps = 6,
                                 .frames_lost = 7,
                                 .duplicates = 8,
-                                .unsupported = 9};
+                                .unsupported = 9,
+                                .unverified = 10};
 
 TEST(DecoderCounters, JsonNamesEveryCounter) {
   EXPECT_EQ(nlohmann::json(kSome), nlohmann::json::parse(R"({"bytes_in":1,"frames_out":2,"crc_failures":3,
-      "resyncs":4,"bytes_discarded":5,"sequence_gaps":6,"frames_lost":7,"duplicates":8,"unsupported":9})"));
+      "resyncs":4,"bytes_discarded":5,"sequence_gaps":6,"frames_lost":7,"duplicates":8,"unsupported":9,
+      "unverified":10})"));
 }
 
 TEST(DecoderCounters, AddsEveryCounter) {
@@ -35,7 +37,8 @@ TEST(DecoderCounters, AddsEveryCounter) {
                                   .sequence_gaps = 12,
                                   .frames_lost = 14,
                                   .duplicates = 16,
-                                  .unsupported = 18}));
+                                  .unsupported = 18,
+                                  .unverified = 20}));
 }
 
 TEST(CountSequenceStep, NextGapWrapAndRepeat) {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -49,6 +50,16 @@ std::uint64_t frame_bytes(const std::vector<Message>& messages) {
 // be one more candidate to reject.
 bool stx_only_in_front(const Bytes& frame) {
   return std::none_of(frame.begin() + 1, frame.end(), [](std::uint8_t b) { return b == kStxV1 || b == kStxV2; });
+}
+
+constexpr std::uint32_t kUnknownId = 0xABCDE;  // in none of the dialects protocol/mavlink_message_specs.cpp holds
+
+// A MAVLink 1 id (8 bits) in none of those dialects.
+std::uint32_t unknown_v1_id() {
+  for (std::uint32_t id = 0; id < 256; ++id) {
+    if (!message_spec(id)) return id;
+  }
+  throw std::logic_error("every MAVLink 1 id is known");
 }
 
 // ---- The messages, as common.xml (and minimal.xml for HEARTBEAT) define them ----
@@ -225,6 +236,41 @@ TEST(MavlinkDefinitions, CrcExtraComputedFromTheDefinitions) {
   EXPECT_EQ(crc_extra(0xABCDE), std::nullopt);
 }
 
+// What MAVLink's own generator wrote into its C headers (MAVLINK_MSG_ID_<name>_CRC, _MIN_LEN and _LEN), from each
+// dialect file the table is made of.
+TEST(MavlinkDefinitions, TableAgreesWithMavlinksGeneratedHeaders) {
+  struct Published {
+    std::uint32_t id;
+    std::string_view name;
+    int crc_extra, min_length, max_length;
+  };
+  const Published published[] = {
+      {0, "HEARTBEAT", 50, 9, 9},                     // minimal.xml
+      {1, "SYS_STATUS", 124, 31, 43},                 // common.xml, from here to HIGHRES_IMU
+      {24, "GPS_RAW_INT", 24, 30, 52},                //
+      {26, "SCALED_IMU", 170, 22, 24},                //
+      {27, "RAW_IMU", 144, 26, 29},                   //
+      {30, "ATTITUDE", 39, 28, 28},                   //
+      {105, "HIGHRES_IMU", 93, 62, 63},               //
+      {152, "MEMINFO", 208, 4, 8},                    // ardupilotmega.xml
+      {163, "AHRS", 127, 28, 28},                     // ardupilotmega.xml
+      {355, "VELOCITY_LIMITS", 6, 12, 12},            // development.xml
+      {10001, "UAVIONIX_ADSB_OUT_CFG", 209, 20, 20},  // uAvionix.xml
+      {42000, "ICAROUS_HEARTBEAT", 227, 1, 1},        // icarous.xml
+      {50001, "CUBEPILOT_RAW_RC", 246, 32, 32},       // cubepilot.xml
+  };
+  for (const Published& p : published) {
+    const MessageSpec* spec = message_spec(p.id);
+    ASSERT_NE(spec, nullptr) << p.name;
+    EXPECT_EQ(spec->name, p.name);
+    EXPECT_EQ(spec->crc_extra, p.crc_extra) << p.name;
+    EXPECT_EQ(spec->min_length, p.min_length) << p.name;
+    EXPECT_EQ(spec->max_length, p.max_length) << p.name;
+    EXPECT_EQ(crc_extra(p.id), spec->crc_extra);
+  }
+  EXPECT_EQ(message_spec(kUnknownId), nullptr);
+}
+
 template <typename M>
 void expect_layout_matches(const MessageDef& def) {
   SCOPED_TRACE(def.name);
@@ -233,6 +279,9 @@ void expect_layout_matches(const MessageDef& def) {
   EXPECT_EQ(M::kName, def.name);
   EXPECT_EQ(M::kBaseLength, payload_length(fields, def.fields.size()));
   EXPECT_EQ(M::kLength, payload_length(fields, fields.size()));
+  ASSERT_NE(message_spec(M::kId), nullptr);
+  EXPECT_EQ(message_spec(M::kId)->min_length, M::kBaseLength);
+  EXPECT_EQ(message_spec(M::kId)->max_length, M::kLength);
 
   // Every field a different value, with every byte of it significant.
   M sent;
@@ -433,8 +482,6 @@ TEST(MavlinkFrame, EncoderRejectsWhatTheWireCannotCarry) {
 
 // ---- Decoder ----
 
-constexpr std::uint32_t kUnknownId = 0xABCDE;  // in no dialect this table knows
-
 // A HEARTBEAT: known, CRC-checked, but not decoded.
 Bytes heartbeat(std::uint8_t seq) {
   const Bytes payload = {0x04, 0, 0, 0, 2, 12, 0x81, 4, 3};  // custom mode 4, quadrotor, PX4, armed, active, v3
@@ -454,7 +501,7 @@ Bytes troubled_stream() {
   append(s, {kStxV2, 0xFF, 0, 0, 4, 1, 1, 27, 0, 0});  // a RAW_IMU header claiming 255 bytes, over six real frames
   for (std::uint8_t seq = 4; seq < 10; ++seq) append(s, bytes_of(kRaw, {.seq = seq}));
   append(s, {kStxV2, 4, 0x02, 0, 10, 1, 1, 30, 0, 0});                         // an incompat flag we cannot parse
-  append(s, bytes_of(make_message(kUnknownId, Bytes{1, 2, 3}, {.seq = 11})));  // trusted: an STX follows
+  append(s, bytes_of(make_message(kUnknownId, Bytes{1, 2, 3}, {.seq = 11})));  // unverifiable, though an STX follows
   append(s, bytes_of(kHighres, {.seq = 12, .sign = true}));
   const Bytes last = bytes_of(kScaled, {.seq = 13});
   s.insert(s.end(), last.begin(), last.begin() + 20);  // cut off by the end of the stream
@@ -464,7 +511,7 @@ Bytes troubled_stream() {
 TEST(MavlinkDecoder, SameMessagesAndCountersAtEverySplitPoint) {
   const Bytes stream = troubled_stream();
   const Decoding whole = decode_stream(stream);
-  ASSERT_EQ(whole.frames.size(), 11u);  // seq 0, 2..9, 11, 12
+  ASSERT_EQ(whole.frames.size(), 10u);  // seq 0, 2..9, 12
   EXPECT_EQ(whole.counters.bytes_in, whole.counters.bytes_discarded + frame_bytes(whole.frames));
 
   EXPECT_EQ(harness::first_split_that_differs(Decoder{}, stream, whole), std::nullopt);
@@ -522,7 +569,8 @@ TEST(MavlinkDecoder, FindsFrameStartingInsideRejectedCandidate) {
   // A parser that drops a rejected candidate's claimed length (the MAVLink C library, mavlink-router) loses both.
   const Bytes inner = bytes_of(kHighres, {.seq = 5});
   const Bytes next = bytes_of(kAttitude, {.seq = 6});
-  const Bytes false_start = {kStxV1, static_cast<std::uint8_t>(inner.size() + 10), 9, 1, 1, HighresImu::kId};
+  const Bytes false_start = {kStxV2, static_cast<std::uint8_t>(inner.size() + 10), 0, 0, 9, 1, 1, HighresImu::kId, 0,
+                             0};
   Bytes stream = false_start;
   append(stream, inner);
   append(stream, next);
@@ -536,38 +584,145 @@ TEST(MavlinkDecoder, FindsFrameStartingInsideRejectedCandidate) {
   EXPECT_EQ(r.counters.bytes_discarded, false_start.size());
 }
 
-TEST(MavlinkDecoder, UnknownIdsAreCountedAndTrustedOnlyBeforeAnotherFrame) {
-  const Message unknown = make_message(kUnknownId, Bytes{9, 8, 7}, {.seq = 0});
-  const Bytes unknown_frame = bytes_of(unknown);
+TEST(MavlinkDecoder, UnknownIdsAreUnverifiedNotFrames) {
+  const Bytes unknown_frame = bytes_of(make_message(kUnknownId, Bytes{9, 8, 7}, {.seq = 0}));
   ASSERT_TRUE(stx_only_in_front(unknown_frame));
-  Bytes stream = unknown_frame;   // followed by an STX: accepted
-  append(stream, heartbeat(1));   // known id, not decoded: CRC-checked, counted unsupported
-  append(stream, unknown_frame);  // followed by a non-STX byte: a false start
+  const Bytes good_heartbeat = heartbeat(1);
+  Bytes stream = unknown_frame;    // followed by an STX
+  append(stream, good_heartbeat);  // known id, not decoded: CRC-checked, counted unsupported
+  append(stream, unknown_frame);   // followed by a non-STX byte
   stream.push_back(0x42);
   Bytes bad_heartbeat = heartbeat(2);
   bad_heartbeat[12] ^= 0x80;  // a known id's CRC is checked even though it is not decoded
   ASSERT_TRUE(stx_only_in_front(bad_heartbeat));
   append(stream, bad_heartbeat);
-  append(stream, unknown_frame);  // ends the stream: accepted at finish()
+  append(stream, unknown_frame);  // ends the stream
 
   const Decoding r = decode_stream(stream);
-  ASSERT_EQ(r.frames.size(), 3u);
-  EXPECT_EQ(r.frames[0], unknown);
-  EXPECT_EQ(r.frames[1].msgid, 0u);
-  EXPECT_EQ(r.frames[2], unknown);
-  EXPECT_EQ(r.counters.unsupported, 3u);
-  EXPECT_EQ(r.counters.resyncs, 2u);
-  EXPECT_EQ(r.counters.crc_failures, 1u);
-  EXPECT_EQ(r.counters.bytes_discarded, unknown_frame.size() + 1 + bad_heartbeat.size());
-  EXPECT_EQ(nlohmann::json(r.frames[0])["payload"], "090807");
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_EQ(r.frames[0].msgid, 0u);
+  EXPECT_EQ(nlohmann::json(r.frames[0])["payload"], "04000000020C810403");  // undecoded: payload bytes in hex
+  EXPECT_EQ(r.counters, (DecoderCounters{.bytes_in = stream.size(),
+                                         .frames_out = 1,
+                                         .crc_failures = 1,
+                                         .resyncs = 1,
+                                         .bytes_discarded = stream.size() - good_heartbeat.size(),
+                                         .unsupported = 1,
+                                         .unverified = 3}));
 
-  // Until the byte after it arrives (or the stream ends), an unknown-id frame is undecided.
+  // The header decides: nothing waits for the rest of an unverifiable candidate or for the byte after it.
   Decoder decoder;
   std::vector<Message> out;
-  decoder.feed(unknown_frame, out);
+  decoder.feed(std::span(unknown_frame).first(kHeaderSizeV2), out);
   EXPECT_TRUE(out.empty());
-  decoder.feed(Bytes{kStxV1}, out);
-  EXPECT_EQ(out.size(), 1u);
+  EXPECT_EQ(decoder.counters().unverified, 1u);
+}
+
+TEST(MavlinkDecoder, FrameStartingInsideAnUnverifiableCandidateIsFound) {
+  // A frame with an id outside the dialects carries real frames in its payload and is followed by another: trusting
+  // the unverifiable length would lose the two inside.
+  for (const std::uint8_t version : {1, 2}) {
+    SCOPED_TRACE("MAVLink " + std::to_string(version));
+    const Message inner_v2 = make_message(kAttitude, {.seq = 1});
+    const Message inner_v1 = make_message(kScaled, {.version = 1, .seq = 2});
+    Bytes payload = bytes_of(inner_v2);
+    append(payload, bytes_of(inner_v1));
+    const std::uint32_t id = version == 1 ? unknown_v1_id() : kUnknownId;
+    const Bytes wrapper = bytes_of(make_message(id, payload, {.version = version, .seq = 0}));
+    const Message after = make_message(kHighres, {.version = version, .seq = 3});
+    Bytes stream = wrapper;
+    append(stream, bytes_of(after));
+    const std::size_t header = version == 1 ? kHeaderSizeV1 : kHeaderSizeV2;
+    ASSERT_TRUE(std::none_of(wrapper.begin() + 1, wrapper.begin() + header,
+                             [](std::uint8_t b) { return b == kStxV1 || b == kStxV2; }));
+    ASSERT_TRUE(
+        std::none_of(wrapper.end() - 2, wrapper.end(), [](std::uint8_t b) { return b == kStxV1 || b == kStxV2; }));
+
+    const Decoding r = decode_stream(stream);
+    EXPECT_EQ(r.frames, (std::vector{inner_v2, inner_v1, after}));
+    EXPECT_EQ(r.counters, (DecoderCounters{.bytes_in = stream.size(),
+                                           .frames_out = 3,
+                                           .bytes_discarded = wrapper.size() - payload.size(),
+                                           .unverified = 1}));
+  }
+}
+
+TEST(MavlinkDecoder, KnownMessagesOfEveryDialectAreVerifiedThoughNotDecoded) {
+  // One message each from common.xml, ardupilotmega.xml (in both versions) and development.xml (whose ids need
+  // MAVLink 2), then one of them damaged: the CRC of each is checked with its own CRC_EXTRA.
+  struct Case {
+    std::uint32_t id;
+    std::uint8_t version;
+  };
+  std::vector<Message> sent;
+  std::uint8_t seq = 0;
+  for (const Case c : {Case{0, 1}, Case{0, 2}, Case{163, 1}, Case{163, 2}, Case{355, 2}}) {
+    const MessageSpec* spec = message_spec(c.id);
+    ASSERT_NE(spec, nullptr);
+    ASSERT_FALSE(is_decoded(c.id));
+    Bytes payload(spec->min_length);
+    for (std::size_t i = 0; i < payload.size(); ++i) payload[i] = static_cast<std::uint8_t>(i + 1);
+    sent.push_back(make_message(c.id, payload, {.version = c.version, .seq = seq++}));
+  }
+  Bytes stream;
+  for (const Message& m : sent) {
+    const Bytes frame = bytes_of(m);
+    ASSERT_TRUE(stx_only_in_front(frame)) << m.msgid;
+    append(stream, frame);
+  }
+  Bytes damaged = bytes_of(make_message(163, Bytes(28, 5), {.version = 1, .seq = seq}));
+  damaged[10] ^= 0x01;
+  ASSERT_TRUE(stx_only_in_front(damaged));
+  append(stream, damaged);
+
+  const Decoding r = decode_stream(stream);
+  EXPECT_EQ(r.frames, sent);
+  EXPECT_EQ(r.counters, (DecoderCounters{.bytes_in = stream.size(),
+                                         .frames_out = sent.size(),
+                                         .crc_failures = 1,
+                                         .resyncs = 1,
+                                         .bytes_discarded = damaged.size(),
+                                         .unsupported = sent.size()}));
+}
+
+TEST(MavlinkDecoder, MavlinkOneLengthMustFitTheMessage) {
+  // ATTITUDE has 28 payload bytes and no extensions. A MAVLink 1 frame of 30, though its CRC verifies, is not the
+  // message its dialect defines. MAVLink 2 takes it: a newer sender may append extensions the table does not know.
+  const Bytes payload(30, 0x11);
+  const Bytes v1 = bytes_of(make_message(Attitude::kId, payload, {.version = 1}));
+  ASSERT_TRUE(stx_only_in_front(v1));
+  const Decoding r1 = decode_stream(v1);
+  EXPECT_TRUE(r1.frames.empty());
+  EXPECT_EQ(r1.counters, (DecoderCounters{.bytes_in = v1.size(), .resyncs = 1, .bytes_discarded = v1.size()}));
+
+  const Message v2 = make_message(Attitude::kId, payload, {.version = 2});
+  const Decoding r2 = decode_stream(bytes_of(v2));
+  EXPECT_EQ(r2.frames, std::vector{v2});
+  EXPECT_TRUE(std::holds_alternative<Attitude>(decode(r2.frames.at(0)).value()));
+}
+
+TEST(MavlinkDecoder, RandomBytesGiveNoFrames) {
+  // Noise is full of STX bytes followed by headers of every kind; none may pass for a frame. mt19937_64's output is
+  // fixed by the standard, so the bytes are the same on every platform.
+  std::mt19937_64 random(20240917);
+  Bytes noise(1 << 20);
+  for (std::size_t i = 0; i < noise.size(); i += 8) {
+    const std::uint64_t word = random();
+    for (std::size_t k = 0; k < 8; ++k) noise[i + k] = static_cast<std::uint8_t>(word >> (8 * k));
+  }
+  for (const std::size_t chunk : {0u, 4096u}) {
+    SCOPED_TRACE("chunk " + std::to_string(chunk));
+    const Decoding r = decode_stream(noise, chunk);
+    EXPECT_TRUE(r.frames.empty());
+    EXPECT_EQ(r.counters.frames_out, 0u);
+    EXPECT_EQ(r.counters.bytes_in, noise.size());
+    EXPECT_EQ(r.counters.bytes_discarded, noise.size());
+    // Every kind of candidate was met and counted, and none was a frame.
+    EXPECT_GT(r.counters.unverified, 0u);
+    EXPECT_GT(r.counters.crc_failures, 0u);
+    EXPECT_GT(r.counters.resyncs, r.counters.crc_failures);
+    EXPECT_EQ(r.counters.unsupported + r.counters.duplicates + r.counters.sequence_gaps, 0u);
+  }
 }
 
 struct Sent {
@@ -616,7 +771,7 @@ TEST(MavlinkDecoder, FinishFindsAFrameInsideACutOffFalseStart) {
   // Near the end of the stream a noise STX starts a header whose length claims more bytes than remain: only the end
   // of the stream refutes it, and the frame inside it comes out of finish().
   const Bytes first = bytes_of(kHighres, {.seq = 0}), hidden = bytes_of(kAttitude, {.seq = 1});
-  const Bytes false_start = {kStxV1, 200, 9, 1, 1, Attitude::kId};
+  const Bytes false_start = {kStxV2, 200, 0, 0, 9, 1, 1, Attitude::kId, 0, 0};
   Bytes stream = first;
   append(stream, false_start);
   append(stream, hidden);
