@@ -246,18 +246,20 @@ TEST(MavlinkDefinitions, TableAgreesWithMavlinksGeneratedHeaders) {
   };
   const Published published[] = {
       {0, "HEARTBEAT", 50, 9, 9},                     // minimal.xml
-      {1, "SYS_STATUS", 124, 31, 43},                 // common.xml, from here to HIGHRES_IMU
-      {24, "GPS_RAW_INT", 24, 30, 52},                //
-      {26, "SCALED_IMU", 170, 22, 24},                //
-      {27, "RAW_IMU", 144, 26, 29},                   //
-      {30, "ATTITUDE", 39, 28, 28},                   //
-      {105, "HIGHRES_IMU", 93, 62, 63},               //
+      {1, "SYS_STATUS", 124, 31, 43},                 // common.xml
+      {24, "GPS_RAW_INT", 24, 30, 52},                // common.xml
+      {26, "SCALED_IMU", 170, 22, 24},                // common.xml
+      {27, "RAW_IMU", 144, 26, 29},                   // common.xml
+      {30, "ATTITUDE", 39, 28, 28},                   // common.xml
+      {105, "HIGHRES_IMU", 93, 62, 63},               // common.xml
       {152, "MEMINFO", 208, 4, 8},                    // ardupilotmega.xml
       {163, "AHRS", 127, 28, 28},                     // ardupilotmega.xml
       {355, "VELOCITY_LIMITS", 6, 12, 12},            // development.xml
       {10001, "UAVIONIX_ADSB_OUT_CFG", 209, 20, 20},  // uAvionix.xml
       {42000, "ICAROUS_HEARTBEAT", 227, 1, 1},        // icarous.xml
       {50001, "CUBEPILOT_RAW_RC", 246, 32, 32},       // cubepilot.xml
+      {10151, "LOWEHEISER_GOV_EFI", 195, 85, 85},     // loweheiser.xml
+      {52000, "AIRLINK_AUTH", 13, 100, 100},          // csAirLink.xml (two char[50])
   };
   for (const Published& p : published) {
     const MessageSpec* spec = message_spec(p.id);
