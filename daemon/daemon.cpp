@@ -137,6 +137,7 @@ struct Daemon::Link {
   std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
+  std::map<std::uint32_t, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
 
   const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }
   void retire_decoder() {
@@ -144,6 +145,7 @@ struct Daemon::Link {
     for (const auto& [layer, counters] : current_decoder().counters()) retired[layer] += counters;
     recorder.reset();
     decoder.reset();
+    clock_epochs.clear();  // a new decoder counts restarts from 0
   }
 };
 
@@ -422,6 +424,12 @@ void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
 void Daemon::process(Link& link, std::int64_t mono_ns) {
   link.samples += samples_.size();
   for (const protocol::Sample& sample : samples_) {
+    if (std::uint32_t& epoch = link.clock_epochs[sample.link_id]; sample.clock_epoch != epoch) {
+      epoch = sample.clock_epoch;
+      spdlog::warn("link '{}': the device restarted (its sequence number and clock went back); estimating from its "
+                   "new clock",
+                   link.config.name);
+    }
     // Usually none or one; a link waiting for its IMU axes releases its first samples' estimates at once.
     estimates_.clear();
     estimation_->update(sample, estimates_);

@@ -108,10 +108,7 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   }
   if (last_input_t_ && sample.t - *last_input_t_ > config_.max_gap) {
     ++counters_.gaps;
-    differentiator_.reset();
-    head_ = 0;
-    ring_sequence_ = ring_cursor_ = 0;  // no interpolation across the gap
-    ring_size_ = 0;
+    restart_window();
   }
   last_input_t_ = sample.t;
 
@@ -184,6 +181,23 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   out.gyro_bias = x_.tail<2>();
   ++counters_.estimates_out;
   return out;
+}
+
+void DragVelocityEstimator::restart_window() {
+  differentiator_.reset();
+  head_ = 0;
+  ring_sequence_ = ring_cursor_ = 0;  // no interpolation across the gap
+  ring_size_ = 0;
+}
+
+void DragVelocityEstimator::restart_clock(double elapsed) {
+  ++counters_.clock_restarts;
+  restart_window();
+  last_input_t_.reset();
+  // The next estimate's time has no relation to filter_t_: it does not predict, and the time between is accounted
+  // here, as a gap without rates would be.
+  if (filter_t_) p_.diagonal() += process_density_ * std::max(elapsed, 0.0);
+  filter_t_.reset();
 }
 
 void DragVelocityEstimator::predict(double dt, const Eigen::Vector3d& w_measured) {

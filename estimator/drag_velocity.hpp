@@ -63,6 +63,7 @@ struct DragVelocityCounters {
   std::uint64_t rejected_out_of_range = 0;  // beyond max_specific_force or max_rate
   std::uint64_t rejected_time = 0;          // timestamp not after the previous accepted sample's
   std::uint64_t gaps = 0;                   // restarts after more than max_gap without samples
+  std::uint64_t clock_restarts = 0;         // the device's clock started again (restart_clock)
   // Accepted samples not estimated because the time_offset aligner had no history |time_offset| back yet: the first
   // |time_offset| seconds of the flight and after each gap (always 0 without a time offset).
   std::uint64_t aligning = 0;
@@ -79,6 +80,10 @@ class DragVelocityEstimator {
   // it was. With a time offset, the sample at t is estimated with the gyro of t - time_offset (interpolated) and
   // keeps its t; samples before the aligner holds |time_offset| of history are counted as `aligning`.
   std::optional<DragVelocityEstimate> update(const ImuSample& sample);
+  // The device restarted: its clock counts from an earlier value now, `elapsed` seconds (by the receiver's clock)
+  // after its last sample. The differentiator and the aligner start again as after a gap; the state is kept, its
+  // uncertainty grown by `elapsed` of process noise, so a short restart costs the velocity nothing.
+  void restart_clock(double elapsed);
 
   const DragVelocityCounters& counters() const { return counters_; }
   int delay_samples() const { return differentiator_.delay_samples(); }
@@ -96,6 +101,8 @@ class DragVelocityEstimator {
   // Pairs the accelerometer with the gyro of time_offset earlier: delays the gyro (time_offset > 0) or the
   // accelerometer (< 0) through a ring. False while the ring does not reach back far enough.
   bool align(ImuSample& sample);
+  // Empties the differentiator's window and the aligner: no derivative or interpolation across a break.
+  void restart_window();
   void predict(double dt, const Eigen::Vector3d& w_measured);
   void fuse_velocity(int axis, double v_measured);
   // Turns the heading by `angle` (rad).

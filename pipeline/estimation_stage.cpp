@@ -118,6 +118,16 @@ void EstimationStage::finish(std::vector<store::Estimate>& out) {
 }
 
 std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const protocol::Sample& sample) {
+  if (sample.clock_epoch != link.clock_epoch) {
+    // The device restarted: its times count from zero again. The samples still in the window before it will get no
+    // estimate, as before a gap; every one after it will.
+    const double elapsed =
+        link.last_recv_mono_ns ? static_cast<double>(sample.recv_mono_ns - *link.last_recv_mono_ns) * 1e-9 : 0.0;
+    link.estimator.restart_clock(elapsed);
+    link.pending.clear();
+    link.clock_epoch = sample.clock_epoch;
+  }
+  link.last_recv_mono_ns = sample.recv_mono_ns;
   const double t = static_cast<double>(sample.device_time_us) * 1e-6;
   estimator::ImuSample input{t, {sample.gyro[0], sample.gyro[1], sample.gyro[2]},
                              {sample.accel[0], sample.accel[1], sample.accel[2]}};

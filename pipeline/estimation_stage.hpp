@@ -65,6 +65,8 @@ class EstimationStage {
     bool rotate = false;                                 // imu_to_body is not the identity
     std::optional<estimator::UpDetector> detector{};      // until the axes are resolved or checked
     std::vector<protocol::Sample> waiting{};             // an auto link's samples until its axes are decided
+    std::uint32_t clock_epoch = 0;                       // the device's restarts so far (protocol::Sample)
+    std::optional<std::int64_t> last_recv_mono_ns{};
   };
 
   LinkState& link(std::uint32_t id);

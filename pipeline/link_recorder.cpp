@@ -68,6 +68,8 @@ void LinkRecorder::record_losses(std::int64_t mono_ns, std::int64_t wall_ns) {
   record("crc_failure", recorded_.crc_failures, now.crc_failures, "frames failed their CRC/checksum");
   record("bytes_discarded", recorded_.bytes_discarded, now.bytes_discarded, "bytes outside any valid frame");
   record("duplicate", recorded_.duplicates, now.duplicates, "repeated frames dropped");
+  record("device_restart", recorded_.device_restarts, now.device_restarts,
+         "device restart (its sequence number and clock went back)");
   recorded_ = now;
 }
 

@@ -92,6 +92,7 @@ std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& cali
   s.link_id = link_id;
   s.seq = frame.sequence;
   s.device_time_us = static_cast<std::int64_t>(frame.device_time_us);
+  s.clock_epoch = frame.clock_epoch;
   s.recv_mono_ns = recv_mono_ns;
   return s;
 }

@@ -13,6 +13,7 @@ DecoderCounters& DecoderCounters::operator+=(const DecoderCounters& other) {
   sequence_gaps += other.sequence_gaps;
   frames_lost += other.frames_lost;
   duplicates += other.duplicates;
+  device_restarts += other.device_restarts;
   unsupported += other.unsupported;
   unverified += other.unverified;
   return *this;
@@ -22,7 +23,7 @@ void to_json(nlohmann::json& j, const DecoderCounters& c) {
   j = nlohmann::json{
       {"bytes_in", c.bytes_in},       {"frames_out", c.frames_out},           {"crc_failures", c.crc_failures},
       {"resyncs", c.resyncs},         {"bytes_discarded", c.bytes_discarded}, {"sequence_gaps", c.sequence_gaps},
-      {"frames_lost", c.frames_lost}, {"duplicates", c.duplicates},           {"unsupported", c.unsupported},
+      {"frames_lost", c.frames_lost}, {"duplicates", c.duplicates},           {"device_restarts", c.device_restarts},           {"unsupported", c.unsupported},
       {"unverified", c.unverified}};
 }
 

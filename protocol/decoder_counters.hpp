@@ -17,6 +17,7 @@ struct DecoderCounters {
   std::uint64_t sequence_gaps = 0;    // times the sequence number jumped (one gap may hide many frames)
   std::uint64_t frames_lost = 0;      // frames missing according to the sequence numbers
   std::uint64_t duplicates = 0;       // valid frames dropped for repeating the sequence number just before them
+  std::uint64_t device_restarts = 0;  // the sender restarted: its sequence number and clock both went back
   std::uint64_t unsupported = 0;      // valid frames of a type this decoder does not interpret (counted, not errors)
   std::uint64_t unverified = 0;       // candidates that cannot be checked, so no frames (MAVLink: an unknown id)
 
@@ -38,6 +39,14 @@ Seq count_sequence_step(Seq previous, Seq seq, DecoderCounters& counters) {
     counters.frames_lost += step - 1u;
   }
   return step;
+}
+
+// A sender that restarts numbers its frames and counts its clock from zero again, so its next frame is not the next
+// number and its time goes back. The next number with its time back is a glitch of the clock, not a restart (the
+// estimator drops that sample); a repeat is a retransmission.
+template <std::unsigned_integral Seq>
+bool is_restart(Seq previous, Seq seq, std::uint64_t previous_time, std::uint64_t time) {
+  return time < previous_time && static_cast<Seq>(seq - previous) > 1;
 }
 
 }  // namespace imubridge::protocol

@@ -97,23 +97,38 @@ inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /
 inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<Frame>& out,
                                    DecoderCounters& counters) {
   // Every well-formed frame uses up a sequence number, known type or not.
-  const auto seq = load_le<std::uint16_t>(&f[kSeqAt]);
+  const auto wire_seq = load_le<std::uint16_t>(&f[kSeqAt]);
+  const auto time_us = load_le<std::uint64_t>(&f[kTimeAt]);
+  const std::size_t type_index = f[kTypeAt] - 1u;  // imu_sample 1, velocity_estimate 2
+  std::optional<std::uint64_t>* last_time = type_index < device_time_us.size() ? &device_time_us[type_index] : nullptr;
   if (!have_seq) {
     have_seq = true;
-    sequence = seq;
+    sequence = wire_seq;
+  } else if (last_time && *last_time && is_restart(seq, wire_seq, **last_time, time_us)) {
+    // A sender numbers its frames from 0 after it boots: the ones before `wire_seq` since then are lost. Those it
+    // sent before the restart and we never saw cannot be known, and unwrapping the step back would invent ~65,000.
+    ++counters.device_restarts;
+    counters.frames_lost += wire_seq;
+    if (wire_seq > 0) ++counters.sequence_gaps;
+    sequence += static_cast<std::uint64_t>(wire_seq) + 1;
+    ++clock_epoch;
+    device_time_us.fill(std::nullopt);  // every type's times are on the new clock now
   } else {
-    const std::uint16_t step = count_sequence_step(static_cast<std::uint16_t>(sequence), seq, counters);
+    const std::uint16_t step = count_sequence_step(seq, wire_seq, counters);
     if (step == 0) return false;  // sent again: the frame before it was this one
     sequence += step;
   }
+  seq = wire_seq;
+  if (last_time) *last_time = time_us;
   if (!payload_size(f[kTypeAt])) {  // a newer sender's message: well formed, but not ours to emit
     ++counters.unsupported;
     return false;
   }
   Frame& frame = out.emplace_back();  // built in place: via a temporary Frame, decoding ran 2x slower
-  frame.seq = seq;
+  frame.seq = wire_seq;
   frame.sequence = sequence;
-  frame.device_time_us = load_le<std::uint64_t>(&f[kTimeAt]);
+  frame.device_time_us = time_us;
+  frame.clock_epoch = clock_epoch;
   frame.payload = read_payload(f.data());
   return true;
 }

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <span>
 #include <variant>
 #include <vector>
@@ -40,6 +41,8 @@ struct Frame {
   std::uint64_t sequence = 0;  // unwrapped by the decoder (first frame: == seq; +65536 per wrap)
   std::uint64_t device_time_us = 0;
   std::variant<ImuRaw, VelocityEstimate> payload;
+  // The sender's restarts the decoder has seen before this frame: device_time_us counts from the last of them.
+  std::uint32_t clock_epoch = 0;
 
   MsgType type() const;
   friend bool operator==(const Frame&, const Frame&) = default;
@@ -74,7 +77,11 @@ class Decoder {
     bool take(std::span<const std::uint8_t> frame, std::vector<Frame>& out, DecoderCounters& counters);
 
     bool have_seq = false;
-    std::uint64_t sequence = 0;  // the last frame's, unwrapped
+    std::uint64_t sequence = 0;  // the last frame's, unwrapped (and continued across restarts)
+    std::uint16_t seq = 0;       // the last frame's, as on the wire
+    // The last frame's time of each message type: a sender may stamp its types from different clocks.
+    std::array<std::optional<std::uint64_t>, 2> device_time_us{};
+    std::uint32_t clock_epoch = 0;
   };
 
   StreamScanner<Framing> scanner_;

@@ -9,6 +9,7 @@ struct Sample {
   std::uint32_t link_id = 0;        // which link (serial port / XBee source) it came from
   std::uint64_t seq = 0;            // sequence number, unwrapped to 64 bits by the receiver
   std::int64_t device_time_us = 0;  // timestamp the device put on the measurement
+  std::uint32_t clock_epoch = 0;    // the device's restarts seen before it: device_time_us counts from the last one
   std::int64_t recv_mono_ns = 0;    // ground-station monotonic time the completing byte chunk arrived
   std::array<double, 3> accel{};    // specific force, m/s^2, IMU axes
   std::array<double, 3> gyro{};     // angular rate, rad/s, IMU axes

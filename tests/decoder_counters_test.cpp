@@ -17,12 +17,13 @@ constexpr DecoderCounters kSome{.bytes_in = 1,
                                 .sequence_gaps = 6,
                                 .frames_lost = 7,
                                 .duplicates = 8,
+                                .device_restarts = 11,
                                 .unsupported = 9,
                                 .unverified = 10};
 
 TEST(DecoderCounters, JsonNamesEveryCounter) {
   EXPECT_EQ(nlohmann::json(kSome), nlohmann::json::parse(R"({"bytes_in":1,"frames_out":2,"crc_failures":3,
-      "resyncs":4,"bytes_discarded":5,"sequence_gaps":6,"frames_lost":7,"duplicates":8,"unsupported":9,
+      "resyncs":4,"bytes_discarded":5,"sequence_gaps":6,"frames_lost":7,"duplicates":8,"device_restarts":11,"unsupported":9,
       "unverified":10})"));
 }
 
@@ -37,8 +38,18 @@ TEST(DecoderCounters, AddsEveryCounter) {
                                   .sequence_gaps = 12,
                                   .frames_lost = 14,
                                   .duplicates = 16,
+                                  .device_restarts = 22,
                                   .unsupported = 18,
                                   .unverified = 20}));
+}
+
+TEST(IsRestart, NeedsTheClockBackAndNotTheNextNumber) {
+  EXPECT_TRUE(is_restart<std::uint16_t>(5000, 0, 5'000'000, 1'000));        // numbered and timed from zero again
+  EXPECT_TRUE(is_restart<std::uint16_t>(3, 0, 9'000'000, 0));               // even when the counter had wrapped
+  EXPECT_FALSE(is_restart<std::uint16_t>(65535, 0, 9'000'000, 9'001'000));  // a wrap: the clock goes on
+  EXPECT_FALSE(is_restart<std::uint16_t>(41, 42, 9'000'000, 8'000'000));    // the next frame: a clock glitch
+  EXPECT_FALSE(is_restart<std::uint16_t>(41, 41, 9'000'000, 8'000'000));    // a repeat
+  EXPECT_FALSE(is_restart<std::uint16_t>(41, 60, 9'000'000, 9'100'000));    // a gap
 }
 
 TEST(CountSequenceStep, NextGapWrapAndRepeat) {

@@ -279,6 +279,25 @@ TEST(ImuFrameDecoder, SequenceWrapsAndGaps) {
   EXPECT_EQ(d.counters.frames_lost, 3u);
 }
 
+TEST(ImuFrameDecoder, ARestartedSenderContinuesTheCountWithoutInventingALoss) {
+  // Numbered and timed from zero again after frame 5000: the unwrapped count goes on, the clock starts a new epoch.
+  Bytes stream;
+  for (std::uint16_t seq : {4998, 4999, 5000, 0, 1, 2, 4}) {
+    Frame f = imu_sample(seq);
+    f.device_time_us = seq * 1000u;
+    append(stream, encoded(f));
+  }
+  const Decoded d = decode(stream);
+  std::vector<std::uint64_t> sequences;
+  std::vector<std::uint32_t> epochs;
+  for (const Frame& f : d.frames) sequences.push_back(f.sequence), epochs.push_back(f.clock_epoch);
+  EXPECT_EQ(sequences, (std::vector<std::uint64_t>{4998, 4999, 5000, 5001, 5002, 5003, 5005}));
+  EXPECT_EQ(epochs, (std::vector<std::uint32_t>{0, 0, 0, 1, 1, 1, 1}));
+  EXPECT_EQ(d.counters.device_restarts, 1u);
+  EXPECT_EQ(d.counters.frames_lost, 1u) << "frame 3 of the new count only";
+  EXPECT_EQ(d.counters.sequence_gaps, 1u);
+}
+
 TEST(ImuFrameDecoder, RepeatedSequenceNumberIsADuplicateNotALoss) {
   // A radio that retransmits delivers the same frame twice; a repeated number is dropped whatever the frame holds.
   const Bytes first = encoded(imu_sample(7)), next = encoded(velocity_estimate(8));

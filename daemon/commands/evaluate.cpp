@@ -39,10 +39,8 @@ json to_json(const est::VelocityError& e) {
 int run(const EvaluateCliOptions& o) {
   const est::ModelParams params = daemon::load_params(o.params);
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link,
-                                                       .reference = pipeline::ReferenceUse::required,
-                                                       .imu_axes = o.imu_axes});
+  const pipeline::SessionSeries session = pipeline::read_session_series(
+      store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   const est::TimeWindow span = percent_span(session.series, o.in_flight);
   const std::optional<est::TimeWindow> window =
@@ -65,7 +63,8 @@ int run(const EvaluateCliOptions& o) {
                       {"rejected_non_finite", c.rejected_non_finite},
                       {"rejected_out_of_range", c.rejected_out_of_range},
                       {"rejected_time", c.rejected_time},
-                      {"gaps", c.gaps}}},
+                      {"gaps", c.gaps},
+                      {"clock_restarts", c.clock_restarts}}},
                     {"series_counts",
                      {{"samples", session.counts.samples},
                       {"non_finite", session.counts.non_finite},
@@ -77,9 +76,8 @@ int run(const EvaluateCliOptions& o) {
     const est::TimeWindow train = est::parse_window(*o.baseline_train, span);
     const est::LinearDragBaseline b = est::linear_drag_baseline(session.series, {train, e.window});
     report["rmse_m_s"]["linear_least_squares"] = to_json(b.scores.validation);
-    report["linear_least_squares"] = {{"train_window", {train.start, train.end}},
-                                      {"k", {b.k.x(), b.k.y()}},
-                                      {"b", {b.b.x(), b.b.y()}}};
+    report["linear_least_squares"] = {
+        {"train_window", {train.start, train.end}}, {"k", {b.k.x(), b.k.y()}}, {"b", {b.b.x(), b.b.y()}}};
   }
   std::printf("%s\n", report.dump(2).c_str());
   return 0;
@@ -100,7 +98,8 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
                   "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
                   "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
   add_in_flight_flag(*cmd, o->in_flight);
-  cmd->add_option("--window", o->window, "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
+  cmd->add_option("--window", o->window,
+                  "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
   return [o] { return run(*o); };
 });
 
