@@ -1,8 +1,10 @@
 #pragma once
-// One serial port of `imubridge run`: opened by path or USB identity, read asynchronously, and reopened with
-// exponential backoff whenever it vanishes (USB unplugged, radio reset, pty closed) or is not there yet. Reading
-// goes on for as long as the link exists: no failure of the port is ever final.
-#include <utility>  // before Boost.Asio, which uses std::exchange without including it
+// One serial port of `imubridge run`: opened by path or USB identity, read asynchronously, and reopened whenever it
+// vanishes (USB unplugged, radio reset, pty closed) or is not there yet: at once when its directory shows a change
+// (DeviceWatch), else with exponential backoff. Reading goes on for as long as the link exists: no failure of the
+// port is ever final. It never reads another program's terminal: not a controlling terminal, and after a loss not
+// the tty a symlink still names unless the symlink was pointed anew or the tty is the very node it was.
+#include <sys/stat.h>
 
 #include <array>
 #include <boost/asio/io_context.hpp>
@@ -12,11 +14,15 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
+#include <optional>
 #include <span>
 #include <string>
+#include <utility>  // before Boost.Asio, which uses std::exchange without including it
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/device_watch.hpp"
 
 namespace imubridge::daemon {
 
@@ -55,6 +61,9 @@ class SerialLink {
  private:
   void try_open();
   void open(const std::string& path);
+  // Throws ForeignTerminal (a std::runtime_error) when the configured symlink still names what it named at the loss,
+  // but the node there is no longer the one that was open: a freed pty that another program may have been given since.
+  void refuse_stale_symlink() const;
   void read();
   void lost(const std::string& reason);
   void retry_later();
@@ -68,7 +77,21 @@ class SerialLink {
   bool stopped_ = true;
   bool ever_opened_ = false;
   bool failure_logged_ = false;  // one log line per outage, however many attempts it takes
+  bool refusal_logged_ = false;  // the same for a tty refused as another program's
   std::string path_;
+  // Identities while open: the configured path's own (lstat; a symlink's inode and change time) and the node read.
+  struct Identity {
+    dev_t dev = 0;
+    ino_t ino = 0;
+    timespec ctime{};
+    dev_t rdev = 0;
+    bool operator==(const Identity& o) const {
+      return dev == o.dev && ino == o.ino && ctime.tv_sec == o.ctime.tv_sec && ctime.tv_nsec == o.ctime.tv_nsec &&
+             rdev == o.rdev;
+    }
+  };
+  std::optional<Identity> opened_symlink_, opened_node_;
+  std::unique_ptr<DeviceWatch> watch_;
   std::array<std::uint8_t, 4096> buffer_{};
   std::deque<std::vector<std::uint8_t>> tx_queue_;
   bool writing_ = false;

@@ -1,6 +1,7 @@
 // `imubridge run` end to end, as a user runs it: frames written into a pseudo-terminal, the daemon reading its slave
 // through a symlink, and the database checked afterwards. Storage limits: cli_run_storage_test.cpp.
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -21,11 +22,12 @@ class RunTest : public ::testing::Test {
  protected:
   void SetUp() override { write_config(""); }
 
-  void write_config(const std::string& extra_tables) {
+  void write_config(const std::string& extra_tables, int reconnect_min_ms = 10, int reconnect_max_ms = 50) {
     std::ofstream(config_) << "stats_interval_s = 3600\n"
                            << extra_tables << "[store]\npath = \"" << db_.string() << "\"\nmin_free_mib = 0\n"
                            << "[[link]]\nname = \"imu\"\ndevice = \"" << tty_.string() << "\"\n"
-                           << "protocol = \"imubridge\"\nreconnect_min_ms = 10\nreconnect_max_ms = 50\n";
+                           << "protocol = \"imubridge\"\nreconnect_min_ms = " << reconnect_min_ms
+                           << "\nreconnect_max_ms = " << reconnect_max_ms << "\n";
   }
   void start(const SpawnOptions& options = {}) {
     daemon_ = std::make_unique<Process>(std::vector<std::string>{"run", "--config", config_.string()}, dir_ / "stderr",
@@ -217,6 +219,104 @@ TEST_F(RunTest, AnUnpluggedDeviceIsReconnectedAndRecordedInTheSameSession) {
   EXPECT_EQ(seqs[kUnplugAt], kUnplugAt + kLostWhileUnplugged);
 }
 
+// The device reboots while unplugged: it comes back at the same path with its frame counter and clock from zero.
+// The backoff is 2 s and more, so only the watch on the link's directory can reconnect within a second.
+TEST_F(RunTest, ADeviceThatRestartsIsReconnectedAtOnceAndEstimatedOnItsNewClock) {
+  write_config("", 2000, 5000);
+  constexpr std::size_t kBefore = 400, kAfter = 300;
+  auto pty = std::make_unique<cli::PtyPair>(tty_);
+  start();
+  ASSERT_TRUE(daemon_->wait_for_log("link 'imu': reading")) << daemon_->log();
+  write_paced(*pty, simulated_frames(kBefore, 3));
+  ASSERT_TRUE(wait_for_samples(db_, kBefore)) << daemon_->log();
+  pty.reset();
+  ASSERT_TRUE(daemon_->wait_for_log("lost /")) << daemon_->log();
+  std::this_thread::sleep_for(300ms);  // the first retry is 2 s away
+  timespec appeared{};
+  ::clock_gettime(CLOCK_MONOTONIC, &appeared);  // the store's recv_mono_ns clock
+  pty = std::make_unique<cli::PtyPair>(tty_);
+  write_paced(*pty, simulated_frames(kAfter, 5));  // numbered from 0 again, its clock from 0 again
+  ASSERT_TRUE(wait_for_samples(db_, kBefore + kAfter)) << daemon_->log();
+  stop();
+
+  const store::Store store(db_, {.read_only = true});
+  const std::int64_t session = store.sessions().at(0).id;
+  std::vector<protocol::Sample> samples;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { samples.push_back(s); });
+  ASSERT_EQ(samples.size(), kBefore + kAfter);
+  for (std::size_t i = 0; i < samples.size(); ++i) ASSERT_EQ(samples[i].seq, i) << "no jump at the restart";
+  const double reconnect_s =
+      static_cast<double>(samples[kBefore].recv_mono_ns - (appeared.tv_sec * 1'000'000'000LL + appeared.tv_nsec)) *
+      1e-9;
+  EXPECT_LT(reconnect_s, 1.0) << "from the device appearing to its first sample";
+  const auto totals = event_totals(store, session);
+  EXPECT_EQ(totals.at("device_restart"), 1);
+  EXPECT_EQ(totals.count("sequence_gap"), 0u) << "nothing was lost: the new stream starts at 0";
+  EXPECT_EQ(count_of(daemon_->log(), "the device restarted"), 1) << daemon_->log();
+  // Every sample gets an estimate but those the differentiator's centred window cannot reach: its first and last
+  // delay_samples() on each clock.
+  std::size_t before = 0, after = 0;
+  store.for_each_estimate(store.runs(session).at(0).id,
+                          [&](const store::Estimate& e) { ++(e.seq < kBefore ? before : after); });
+  const std::size_t edge = 2 * pipeline::EstimationStage(estimator::ModelParams{}).delay_samples();
+  EXPECT_EQ(before, kBefore - edge);
+  EXPECT_EQ(after, kAfter - edge);
+}
+
+// A feeder killed with -9 leaves the link's symlink naming its freed pty. Whoever gets that pty next (a terminal,
+// say) is not the device: the daemon waits for the symlink to be pointed anew.
+TEST_F(RunTest, AFreedPtyTheSymlinkStillNamesIsNotRead) {
+  auto feeder = std::make_unique<cli::PtyPair>(dir_ / "feeder");
+  fs::create_symlink(feeder->slave_name(), tty_);
+  const std::string freed = feeder->slave_name();
+  start();
+  ASSERT_TRUE(daemon_->wait_for_log("link 'imu': reading")) << daemon_->log();
+  write_paced(*feeder, simulated_frames(50));
+  ASSERT_TRUE(wait_for_samples(db_, 50)) << daemon_->log();
+  feeder.reset();  // its own symlink goes, ours stays
+  ASSERT_TRUE(daemon_->wait_for_log("lost /")) << daemon_->log();
+  // The kernel gives out the lowest free pty number: hold pairs until one is the freed pty.
+  std::vector<std::unique_ptr<cli::PtyPair>> others;
+  for (int i = 0; i < 64 && (others.empty() || others.back()->slave_name() != freed); ++i)
+    others.push_back(std::make_unique<cli::PtyPair>(dir_ / ("other" + std::to_string(i))));
+  if (others.back()->slave_name() != freed) GTEST_SKIP() << freed << " was taken by another process";
+  cli::PtyPair& stranger = *others.back();
+  ASSERT_TRUE(daemon_->wait_for_log("still names the tty")) << daemon_->log();
+  write_paced(stranger, simulated_frames(20, 7));
+  std::this_thread::sleep_for(300ms);
+  EXPECT_EQ(committed_samples(db_).size(), 50u) << "nothing from the stranger's pty";
+
+  fs::remove(tty_);  // pointed anew, at the same pty: now it is the device
+  fs::create_symlink(stranger.slave_name(), tty_);
+  ASSERT_TRUE(daemon_->wait_for_log("reconnected to")) << daemon_->log();
+  write_paced(stranger, simulated_frames(20, 7));
+  EXPECT_TRUE(wait_for_samples(db_, 70)) << daemon_->log();
+  stop();
+}
+
+// A tty that is some session's controlling terminal is a person's terminal, whatever the link names.
+TEST_F(RunTest, AnotherSessionsTerminalIsNeverRead) {
+  cli::PtyPair terminal(dir_ / "terminal");
+  const pid_t shell = ::fork();
+  if (shell == 0) {
+    ::setsid();
+    // A session leader without a terminal acquires the first tty it opens without O_NOCTTY.
+    if (::open(terminal.slave_name().c_str(), O_RDWR) < 0) ::_exit(1);
+    ::pause();
+    ::_exit(0);
+  }
+  ASSERT_GT(shell, 0);
+  fs::create_symlink(terminal.slave_name(), tty_);
+  start();
+  EXPECT_TRUE(daemon_->wait_for_log("controlling terminal of process " + std::to_string(shell))) << daemon_->log();
+  write_paced(terminal, simulated_frames(20));
+  std::this_thread::sleep_for(200ms);
+  EXPECT_EQ(committed_samples(db_).size(), 0u);
+  stop();
+  ::kill(shell, SIGKILL);
+  ::waitpid(shell, nullptr, 0);
+}
+
 TEST_F(RunTest, KillMinus9KeepsEverythingCommittedBeforeIt) {
   const auto frames = simulated_frames(1200);
   cli::PtyPair pty(tty_);
@@ -327,8 +427,8 @@ TEST_F(RunTest, BridgeAndFeedbackBytesReachTheVehicleAndAreRecorded) {
   ASSERT_TRUE(eventually([&] {
     std::uint8_t buffer[4096];
     socklen_t length = sizeof bridge;
-    for (ssize_t n; (n = ::recvfrom(station, buffer, sizeof buffer, 0, reinterpret_cast<sockaddr*>(&bridge),
-                                    &length)) > 0;) {
+    for (ssize_t n;
+         (n = ::recvfrom(station, buffer, sizeof buffer, 0, reinterpret_cast<sockaddr*>(&bridge), &length)) > 0;) {
       at_station.insert(at_station.end(), buffer, buffer + n);
     }
     return at_station.size() >= frames.size() * frames[0].size();
