@@ -63,14 +63,14 @@ bool skip_without_flight(benchmark::State& state) {
   return true;
 }
 
-void Identify(benchmark::State& state, estimator::VelocitySource velocity) {
+void Identify(benchmark::State& state, estimator::VelocitySource velocity, bool hold_bias) {
   if (skip_without_flight(state)) return;
   estimator::IdentifyOptions options;
   options.model = estimator::ModelKind::kFull;
   options.velocity = velocity;
   options.train = real_flight()->train;
   options.validate = real_flight()->validate;
-  options.hold.blocks[static_cast<int>(estimator::FullBlock::kAccelBias)] = true;
+  options.hold.blocks[static_cast<int>(estimator::FullBlock::kAccelBias)] = hold_bias;
   for (auto _ : state) {
     benchmark::DoNotOptimize(velocity == estimator::VelocitySource::kFilter
                                  ? diagnose::identify_by_filter_error(real_flight()->series, options)
@@ -89,11 +89,19 @@ void Diagnose(benchmark::State& state, diagnose::VelocitySource velocity) {
   for (auto _ : state) benchmark::DoNotOptimize(diagnose::run_diagnosis(real_flight()->series, options));
 }
 
-BENCHMARK_CAPTURE(Identify, FullReference, estimator::VelocitySource::kReference)
+BENCHMARK_CAPTURE(Identify, FullReferenceBiasHeld, estimator::VelocitySource::kReference, true)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
-BENCHMARK_CAPTURE(Identify, FullImuAlone, estimator::VelocitySource::kFilter)
+BENCHMARK_CAPTURE(Identify, FullReference, estimator::VelocitySource::kReference, false)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK_CAPTURE(Identify, FullImuAloneBiasHeld, estimator::VelocitySource::kFilter, true)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK_CAPTURE(Identify, FullImuAlone, estimator::VelocitySource::kFilter, false)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
