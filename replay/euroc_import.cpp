@@ -178,16 +178,17 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
         if (beyond_range(accel, options.accel_lsb)) result.clipped.add(row.line, accel_beyond);
         if (beyond_range(gyro, options.gyro_lsb)) result.clipped.add(row.line, gyro_beyond);
+        const std::uint64_t since_t0 = elapsed_ns(t0, row.t_ns);
         bytes.clear();
         protocol::imu::encode({.seq = static_cast<std::uint16_t>(result.imu.rows),
-                               .device_time_us = static_cast<std::uint64_t>((row.t_ns - t0 + 500) / 1000),
+                               .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
                                .payload = calibration.to_counts(accel, gyro, {}, 0.0)},
                               bytes);
         samples.clear();
         recorder->on_chunk(bytes, row.t_ns, row.t_ns, samples);
         ++result.imu.rows;
         last_t = row.t_ns;
-        axes_t.push_back(static_cast<double>(row.t_ns - t0) * 1e-9);
+        axes_t.push_back(static_cast<double>(since_t0) * 1e-9);
         axes_accel.emplace_back(accel[0], accel[1], accel[2]);
         axes_gyro.emplace_back(gyro[0], gyro[1], gyro[2]);
         store.commit_if_due(std::chrono::steady_clock::now());

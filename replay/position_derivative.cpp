@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "replay/text_table.hpp"
+
 namespace imubridge::replay {
 
 std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<const std::int64_t> t_ns,
@@ -11,11 +13,12 @@ std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<co
                                                                     double half_window_s) {
   if (t_ns.size() != positions.size()) throw std::invalid_argument("velocity_from_positions: lengths differ");
   const auto half_ns = static_cast<std::int64_t>(std::llround(half_window_s * 1e9));
+  const auto window = static_cast<std::uint64_t>(half_ns);
   std::vector<std::optional<Eigen::Vector3d>> velocity(t_ns.size());
   std::size_t first = 0, last = 0;  // the window [first, last)
   for (std::size_t i = 0; i < t_ns.size(); ++i) {
-    while (t_ns[i] - t_ns[first] > half_ns) ++first;
-    while (last < t_ns.size() && t_ns[last] - t_ns[i] <= half_ns) ++last;
+    while (elapsed_ns(t_ns[first], t_ns[i]) > window) ++first;
+    while (last < t_ns.size() && elapsed_ns(t_ns[i], t_ns[last]) <= window) ++last;
     if (last - first < 3) continue;
     // p(s) = a + b s + c s^2 with s = (t - t_i) / half_window, so the normal equations stay well conditioned.
     Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();

@@ -53,4 +53,10 @@ std::string format_ranges(std::span<const std::int64_t> increasing);
 // fit 64 bits.
 std::optional<std::int64_t> parse_scaled_integer(std::string_view text, int exponent);
 
+// later - earlier for timestamps in order (later >= earlier), exact over the whole range: the rows' stamps may lie
+// further apart than an int64 difference holds (2^63 ns, 292 years).
+inline std::uint64_t elapsed_ns(std::int64_t earlier, std::int64_t later) {
+  return static_cast<std::uint64_t>(later) - static_cast<std::uint64_t>(earlier);
+}
+
 }  // namespace imubridge::replay

@@ -159,6 +159,20 @@ TEST(VelocityFromPositions, NoVelocityWithoutThreePositionsInTheWindow) {
   EXPECT_THROW(velocity_from_positions(t, std::span(p).first(3)), std::invalid_argument);
 }
 
+TEST(VelocityFromPositions, TakesStampsFurtherApartThanAnInt64DifferenceHolds) {
+  constexpr std::int64_t kFirst = std::numeric_limits<std::int64_t>::min();
+  constexpr std::int64_t kLast = std::numeric_limits<std::int64_t>::max();
+  const std::vector<std::int64_t> t{kFirst, 0, 5'000'000, 10'000'000, kLast};
+  const std::vector<Eigen::Vector3d> p{{9, 9, 9}, {0, 0, 0}, {0.01, 0, 0}, {0.02, 0, 0}, {9, 9, 9}};
+  const auto v = velocity_from_positions(t, p);
+  EXPECT_FALSE(v[0].has_value());  // each end alone in its window
+  EXPECT_FALSE(v[4].has_value());
+  for (std::size_t i = 1; i <= 3; ++i) {
+    ASSERT_TRUE(v[i].has_value()) << i;
+    EXPECT_NEAR(v[i]->x(), 2, 1e-9) << i;
+  }
+}
+
 TEST_F(EurocImport, SkipsEveryKindOfJunkRowAndCountsItByLine) {
   store::Store store(db_);
   const auto r = import_euroc(store, {.dir = kFixture});
@@ -207,6 +221,17 @@ TEST_F(EurocImport, SamplesCarryTheRowsOnTheDatasetClockWithinHalfACount) {
   EXPECT_EQ(session.info.kind, "import");
   EXPECT_EQ(session.info.started_wall_ns, kT0);
   EXPECT_EQ(session.ended_wall_ns, kT0 + 45'000'000);
+}
+
+TEST_F(EurocImport, TheDeviceClockSpansStampsFurtherApartThanAnInt64DifferenceHolds) {
+  fs::create_directories(dir_ / "mav0/imu0");
+  std::ofstream(dir_ / "mav0/imu0/data.csv") << "-5,0,0,0,0,0,-9.81\n9223372036854775807,0,0,0,0,0,-9.81\n";
+  store::Store store(db_);
+  const auto r = import_euroc(store, {.dir = dir_});
+  const auto got = samples(store, r.session);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0].device_time_us, 0);
+  EXPECT_EQ(got[1].device_time_us, 9'223'372'036'854'776);  // 2^63 + 4 ns after the first row, to the nearest us
 }
 
 TEST_F(EurocImport, TumReferenceIsStoredInNedWithItsVelocityDerived) {
