@@ -376,7 +376,10 @@ Config parse_config(std::string_view toml_text, std::string_view source) {
   if (auto outputs = t.table("outputs")) config.outputs = read_outputs(*outputs);
   if (const toml::node* links = t.find("link")) {
     const toml::array* array = links->as_array();
-    if (!array || !array->is_array_of_tables()) t.fail("link", "must be an array of tables: write [[link]]");
+    // No links: `link = []`, as to_toml() writes it; toml++ does not count an empty array as one of tables.
+    if (!array || !(array->empty() || array->is_array_of_tables())) {
+      t.fail("link", "must be an array of tables: write [[link]]");
+    }
     for (std::size_t i = 0; i < array->size(); ++i) {
       Table link(*array->get(i)->as_table(), "link[" + std::to_string(i) + "]", source);
       config.links.push_back(read_link(link));

@@ -191,6 +191,12 @@ scale = [0.1, 0.2, 0.30000000000000004]
   EXPECT_EQ(copy.outputs.line_streams[0].port, 9871);
 }
 
+TEST(ConfigFile, TheSnapshotOfAConfigurationWithoutLinksReadsBack) {
+  const std::string text = to_toml(parse_config("", "empty.toml"));
+  EXPECT_NE(text.find("link = []"), std::string::npos) << text;
+  EXPECT_EQ(to_toml(parse_config(text, "snapshot")), text);
+}
+
 TEST(LinkSpec, PathsUsbIdentitiesProtocolsAndBaudRates) {
   LinkSpec s = parse_link_spec("imu=/dev/ttyUSB0:imubridge");
   EXPECT_EQ(s.name, "imu");
