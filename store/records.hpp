@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "store/process_identity.hpp"
+
 namespace imubridge::store {
 
 struct SessionInfo {
@@ -22,9 +24,20 @@ struct SessionInfo {
 struct Session {
   std::int64_t id = 0;
   SessionInfo info{};
-  std::optional<std::int64_t> ended_wall_ns{};  // empty while recording, or if the recorder died
+  // Empty while recording, or while its writer's death is not yet noticed (Store::end_interrupted_sessions).
+  std::optional<std::int64_t> ended_wall_ns{};
+  // The ending is the last stored time of a writer that died without ending the session.
+  bool interrupted = false;
+  std::optional<ProcessIdentity> writer{};  // the process that began it; empty in files of schema version 1
   friend bool operator==(const Session&, const Session&) = default;
 };
+
+// "ended", "interrupted" (its writer died; ended at its last stored time) or "open" (being written, or written by a
+// process this file cannot tell is gone).
+inline const char* state_name(const Session& session) {
+  if (!session.ended_wall_ns) return "open";
+  return session.interrupted ? "interrupted" : "ended";
+}
 
 struct Link {
   std::int64_t id = 0;

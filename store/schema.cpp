@@ -99,7 +99,19 @@ void create_schema_v1(Database& db) {
   db.exec("PRAGMA application_id = " + std::to_string(kApplicationId));
 }
 
-constexpr std::array<MigrationStep, kSchemaVersion> kMigrations{create_schema_v1};
+// Who writes each session, so a later start can tell a session whose writer died (it stays open forever) from one
+// still being recorded (store/process_identity.hpp); and whether an ending was written by such a recovery. Sessions
+// of version 1 have no writer: they are never taken for interrupted.
+constexpr std::string_view kSchemaV2 = R"sql(
+ALTER TABLE sessions ADD COLUMN writer_pid INTEGER;
+ALTER TABLE sessions ADD COLUMN writer_boot_id TEXT;
+ALTER TABLE sessions ADD COLUMN writer_start_ticks INTEGER;
+ALTER TABLE sessions ADD COLUMN interrupted INTEGER NOT NULL DEFAULT 0;
+)sql";
+
+void add_session_writers(Database& db) { db.exec(kSchemaV2); }
+
+constexpr std::array<MigrationStep, kSchemaVersion> kMigrations{create_schema_v1, add_session_writers};
 
 std::int64_t user_version(const Database& db) { return db.query_int("PRAGMA user_version"); }
 
@@ -127,7 +139,7 @@ void migrate(Database& db, std::span<const MigrationStep> steps) {
   }
 }
 
-void open_schema(Database& db, bool read_only) {
+std::int64_t open_schema(Database& db, bool read_only) {
   // The first read of the file: a file that is not SQLite at all fails here, with "file is not a database".
   const bool empty = db.query_int("SELECT count(*) FROM sqlite_schema") == 0;
   const std::int64_t application_id = db.query_int("PRAGMA application_id");
@@ -137,12 +149,14 @@ void open_schema(Database& db, bool read_only) {
   }
   const std::int64_t version = user_version(db);
   if (version > kSchemaVersion) throw newer_schema(db, version, kSchemaVersion);
-  if (version == kSchemaVersion) return;
+  if (version == kSchemaVersion) return version;
   if (read_only) {
+    if (version >= kOldestReadableVersion) return version;
     throw StoreError(db.name() + " has schema " + std::to_string(version) + " and needs an upgrade to " +
                      std::to_string(kSchemaVersion) + ", which a read-only open cannot do");
   }
   migrate(db, migrations());
+  return kSchemaVersion;
 }
 
 }  // namespace imubridge::store

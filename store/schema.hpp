@@ -11,7 +11,10 @@ namespace imubridge::store {
 // PRAGMA application_id of an imubridge database ("IMUB"), so neither we nor `file` mistake another program's.
 inline constexpr std::int32_t kApplicationId = 0x494D5542;
 // PRAGMA user_version this build writes, and the newest it reads.
-inline constexpr std::int64_t kSchemaVersion = 1;
+inline constexpr std::int64_t kSchemaVersion = 2;
+// The oldest schema a read-only open reads as it is (the readers take what later versions added as absent), so that
+// exporting or replaying a file recorded by an older imubridge needs no write access.
+inline constexpr std::int64_t kOldestReadableVersion = 1;
 
 // One step upgrades a database from schema version N (its index in the list) to N + 1.
 using MigrationStep = void (*)(Database&);
@@ -24,7 +27,8 @@ std::span<const MigrationStep> migrations();
 void migrate(Database& db, std::span<const MigrationStep> steps);
 
 // Checks that `db` is an empty database or an imubridge one this build can read, and migrates it to kSchemaVersion
-// unless `read_only`, in which case an older schema is an error. Throws StoreError with a one-line reason.
-void open_schema(Database& db, bool read_only);
+// unless `read_only`, in which case a schema older than kOldestReadableVersion is an error. Returns the schema
+// version the file now has. Throws StoreError with a one-line reason.
+std::int64_t open_schema(Database& db, bool read_only);
 
 }  // namespace imubridge::store

@@ -171,7 +171,7 @@ Statement& bind_optional_int(Statement& statement, int index, std::optional<std:
 
 Database open_database(const std::filesystem::path& path, bool read_only) {
   Database db(path, read_only);
-  open_schema(db, read_only);
+  open_schema(db, read_only);  // the version it leaves is read back by the Store
   db.exec("PRAGMA foreign_keys = ON");
   if (!read_only) {
     // WAL: readers (replay, export) never block the recorder. NORMAL: a commit costs no fsync; WAL still keeps the
@@ -187,6 +187,7 @@ Database open_database(const std::filesystem::path& path, bool read_only) {
 
 Store::Store(const std::filesystem::path& path, Options options)
     : db_(open_database(path, options.read_only)), options_(options) {
+  schema_version_ = db_.query_int("PRAGMA user_version");
   if (!options.read_only && options.background_checkpoint.count() > 0) {
     db_.exec("PRAGMA wal_autocheckpoint = 0");  // the checkpointer's job now
     checkpointer_ = std::make_unique<WalCheckpointer>(path, options.background_checkpoint);
@@ -262,12 +263,75 @@ void Store::commit() {
 }
 
 std::int64_t Store::begin_session(const SessionInfo& info) {
-  insert_session_.bind_text(1, info.kind)
+  // Prepared here rather than with the other statements: a read-only Store of a version 1 file has no writer columns.
+  Statement insert(db_,
+                   "INSERT INTO sessions (kind, source, started_wall_ns, config, software_version, writer_pid, "
+                   "writer_boot_id, writer_start_ticks) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)");
+  insert.bind_text(1, info.kind)
       .bind_text(2, info.source)
       .bind_int(3, info.started_wall_ns)
       .bind_text(4, info.config)
       .bind_text(5, info.software_version);
-  return insert_committed(insert_session_, "starting a session");
+  if (writer_) {
+    insert.bind_int(6, writer_->pid).bind_text(7, writer_->boot_id).bind_int(8, writer_->start_ticks);
+  } else {
+    bind_nulls(insert, 6, 3);
+  }
+  return insert_committed(insert, "starting a session");
+}
+
+std::vector<InterruptedSession> Store::end_interrupted_sessions() {
+  commit();
+  std::vector<InterruptedSession> ended;
+  try {
+    // BEGIN IMMEDIATE: another process doing the same waits, then finds these sessions ended.
+    begin_.step();
+    std::vector<InterruptedSession> open;
+    Statement query(db_,
+                    "SELECT id, started_wall_ns, writer_pid, writer_boot_id, writer_start_ticks FROM sessions "
+                    "WHERE ended_wall_ns IS NULL AND writer_pid IS NOT NULL ORDER BY id");
+    while (query.step()) {
+      open.push_back(
+          {.session = query.column_int(0),
+           .ended_wall_ns = query.column_int(1),
+           .writer = {
+               .pid = query.column_int(2), .boot_id = query.column_text(3), .start_ticks = query.column_int(4)}});
+    }
+    for (InterruptedSession& s : open) {
+      if (is_running(s.writer)) continue;
+      std::int64_t last_mono_ns = 0;
+      for (const char* last_row :
+           {"SELECT recv_mono_ns, recv_wall_ns FROM chunks WHERE session_id = ?1 "
+            "ORDER BY id DESC LIMIT 1",
+            "SELECT mono_ns, wall_ns FROM events WHERE session_id = ?1 ORDER BY id DESC LIMIT 1"}) {
+        Statement last(db_, last_row);
+        last.bind_int(1, s.session);
+        if (last.step() && last.column_int(1) >= s.ended_wall_ns) {
+          last_mono_ns = last.column_int(0);
+          s.ended_wall_ns = last.column_int(1);
+        }
+      }
+      Statement mark(db_, "UPDATE sessions SET ended_wall_ns = ?2, interrupted = 1 WHERE id = ?1");
+      mark.bind_int(1, s.session).bind_int(2, s.ended_wall_ns);
+      mark.step();
+      const std::string detail = "its writer, process " + std::to_string(s.writer.pid) +
+                                 ", ended without ending it; ended at its last stored time by process " +
+                                 (writer_ ? std::to_string(writer_->pid) : std::string("?"));
+      insert_event_.bind_int(1, s.session)
+          .bind_null(2)
+          .bind_int(3, last_mono_ns)
+          .bind_int(4, s.ended_wall_ns)
+          .bind_text(5, "interrupted")
+          .bind_int(6, 1)
+          .bind_text(7, detail);
+      insert_event_.step();
+      ended.push_back(s);
+    }
+    commit_.step();
+  } catch (const StoreError& e) {
+    fail(e, "ending interrupted sessions");
+  }
+  return ended;
 }
 
 void Store::end_session(std::int64_t session, std::int64_t ended_wall_ns) {
@@ -418,18 +482,25 @@ void Store::append_reference(std::int64_t session, const ReferenceRow& row) {
 }
 
 std::vector<Session> Store::sessions() const {
-  Statement query(db_,
-                  "SELECT id, kind, source, config, started_wall_ns, software_version, ended_wall_ns "
-                  "FROM sessions ORDER BY id");
+  Statement query(db_, schema_version_ >= 2 ? "SELECT id, kind, source, config, started_wall_ns, software_version, "
+                                              "ended_wall_ns, interrupted, writer_pid, writer_boot_id, "
+                                              "writer_start_ticks FROM sessions ORDER BY id"
+                                            : "SELECT id, kind, source, config, started_wall_ns, software_version, "
+                                              "ended_wall_ns, 0, NULL, NULL, NULL FROM sessions ORDER BY id");
   std::vector<Session> sessions;
   while (query.step()) {
-    sessions.push_back({.id = query.column_int(0),
-                        .info = {.kind = query.column_text(1),
-                                 .source = query.column_text(2),
-                                 .config = query.column_text(3),
-                                 .started_wall_ns = query.column_int(4),
-                                 .software_version = query.column_text(5)},
-                        .ended_wall_ns = column_optional_int(query, 6)});
+    Session& s = sessions.emplace_back(Session{.id = query.column_int(0),
+                                               .info = {.kind = query.column_text(1),
+                                                        .source = query.column_text(2),
+                                                        .config = query.column_text(3),
+                                                        .started_wall_ns = query.column_int(4),
+                                                        .software_version = query.column_text(5)},
+                                               .ended_wall_ns = column_optional_int(query, 6),
+                                               .interrupted = query.column_int(7) != 0});
+    if (!query.is_null(8)) {
+      s.writer = ProcessIdentity{
+          .pid = query.column_int(8), .boot_id = query.column_text(9), .start_ticks = query.column_int(10)};
+    }
   }
   return sessions;
 }

@@ -20,11 +20,19 @@
 
 #include "protocol/sample.hpp"
 #include "store/error.hpp"
+#include "store/process_identity.hpp"
 #include "store/records.hpp"
 #include "store/sqlite.hpp"
 #include "store/wal_checkpointer.hpp"
 
 namespace imubridge::store {
+
+// A session end_interrupted_sessions() ended.
+struct InterruptedSession {
+  std::int64_t session = 0;
+  std::int64_t ended_wall_ns = 0;  // its last stored time
+  ProcessIdentity writer{};
+};
 
 struct StoreOptions {
   // commit_if_due() commits once this much time has passed since its previous commit.
@@ -72,8 +80,15 @@ class Store {
   // Writing. Rows join the open batch; sessions, links and runs are committed at once since others refer to them.
   // A write that fails throws StoreError. A row the schema rejects (unknown session, link or run) is refused alone;
   // any other failure (disk full, I/O error) rolls back the batch, and the message says how many rows were lost.
+  // The session's writer is this process (process_identity.hpp).
   std::int64_t begin_session(const SessionInfo& info);
   void end_session(std::int64_t session, std::int64_t ended_wall_ns);
+  // Ends every open session whose writer has died (killed, crashed, or its machine lost power) as interrupted, at
+  // its last stored time: the wall time of its last chunk or event (in the order they were appended), whichever is
+  // later, or its start if it has neither. Each gets an `interrupted` event stamped with that time and the monotonic
+  // time of the same row. A session whose writer still runs is left alone, as is one of schema version 1 (no writer
+  // recorded). All in one transaction: two stores doing this at once end each session once. Returns those ended.
+  std::vector<InterruptedSession> end_interrupted_sessions();
   std::int64_t add_link(std::int64_t session, std::string_view name, std::string_view protocol,
                         std::string_view device);
   // Chunks, samples and estimates come at the sample rate, so they wait in memory and reach SQLite in bursts, in
@@ -151,15 +166,14 @@ class Store {
 
   Database db_;
   Options options_;
+  std::int64_t schema_version_ = 0;  // a read-only Store may read an older file
+  std::optional<ProcessIdentity> writer_ = this_process();
   std::unique_ptr<WalCheckpointer> checkpointer_;  // after db_: stopped before the main connection closes
   std::size_t pending_rows_ = 0;
   std::optional<std::chrono::steady_clock::time_point> last_due_commit_;
 
   Statement begin_{db_, "BEGIN IMMEDIATE"};
   Statement commit_{db_, "COMMIT"};
-  Statement insert_session_{db_,
-                            "INSERT INTO sessions (kind, source, started_wall_ns, config, software_version) "
-                            "VALUES (?1, ?2, ?3, ?4, ?5)"};
   Statement end_session_{db_, "UPDATE sessions SET ended_wall_ns = ?2 WHERE id = ?1"};
   Statement insert_link_{db_, "INSERT INTO links (session_id, name, protocol, device) VALUES (?1, ?2, ?3, ?4)"};
   Table<detail::WaitingChunk> chunks_{db_, "chunks (session_id, link_id, direction, recv_mono_ns, recv_wall_ns, bytes)",

@@ -161,7 +161,7 @@ TEST_F(StoreTest, SessionsLinksRunsAndEventsRoundTrip) {
   Store store(path_, {.read_only = true});
   const std::vector<Session> sessions = store.sessions();
   ASSERT_EQ(sessions.size(), 2u);
-  EXPECT_EQ(sessions[0], (Session{live, kLive, kLive.started_wall_ns + 60'000'000'000}));
+  EXPECT_EQ(sessions[0], (Session{live, kLive, kLive.started_wall_ns + 60'000'000'000, false, this_process()}));
   EXPECT_EQ(sessions[0].info.software_version, IMUBRIDGE_VERSION);
   EXPECT_EQ(sessions[1].info, sim);
   EXPECT_EQ(sessions[1].ended_wall_ns, std::nullopt);
@@ -760,8 +760,8 @@ TEST_F(StoreTest, NewerSchemaIsAOneLineErrorAndTheFileIsLeftAlone) {
   { Store store(path_); }
   execute(path_, "PRAGMA user_version = 7");
   const std::vector<char> before = file_bytes(path_);
-  const std::string expected =
-      path_.string() + " was written by a newer imubridge (schema 7, this build reads up to 1)";
+  const std::string expected = path_.string() + " was written by a newer imubridge (schema 7, this build reads up to " +
+                               std::to_string(kSchemaVersion) + ")";
   EXPECT_EQ(error_of([&] { Store store(path_); }), expected);
   EXPECT_EQ(error_of([&] { Store store(path_, {.read_only = true}); }), expected);
   EXPECT_EQ(file_bytes(path_), before);
@@ -786,7 +786,106 @@ TEST_F(StoreTest, AnotherProgramsDatabaseIsRefusedAndLeftAlone) {
   EXPECT_EQ(file_bytes(path_), before);
 }
 
-// Hypothetical schema versions 1 and 2, to exercise the mechanism beyond this build's single step.
+// A session begun, given a chunk and an event, and never ended, by a child process that then exits without ending
+// it, as a recorder killed mid-flight does. Returns the session's id.
+std::int64_t session_of_a_process_that_died(const fs::path& path, std::int64_t chunk_wall_ns,
+                                            std::int64_t event_wall_ns) {
+  const pid_t child = ::fork();
+  if (child == 0) {
+    try {
+      Store store(path);
+      const auto session = store.begin_session({.kind = "live", .source = "died", .started_wall_ns = 1000});
+      const auto link = store.add_link(session, "imu", "imubridge", "/dev/null");
+      store.append_chunk(session, link, Direction::rx, 70, chunk_wall_ns, std::vector<std::uint8_t>{1, 2});
+      store.append_event(session, {.mono_ns = 80, .wall_ns = event_wall_ns, .kind = "note", .detail = "x"});
+      store.commit();
+      ::_exit(static_cast<int>(session));  // no destructor, no ending
+    } catch (...) {
+      ::_exit(0);
+    }
+  }
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 0;
+}
+
+TEST_F(StoreTest, ASessionWhoseWriterDiedIsEndedAsInterruptedAtItsLastStoredTime) {
+  ASSERT_EQ(session_of_a_process_that_died(path_, 5000, 4000), 1);  // its chunk is its latest row
+  ASSERT_EQ(session_of_a_process_that_died(path_, 5000, 6000), 2);  // its event is
+  Store store(path_);
+  const auto ours = store.begin_session({.kind = "live", .started_wall_ns = 2000});
+  const auto ended = store.end_interrupted_sessions();
+  ASSERT_EQ(ended.size(), 2u);
+  EXPECT_EQ(ended[0].session, 1);
+  EXPECT_EQ(ended[0].ended_wall_ns, 5000);
+  EXPECT_EQ(ended[1].session, 2);
+  EXPECT_EQ(ended[1].ended_wall_ns, 6000);
+
+  const auto sessions = store.sessions();
+  ASSERT_EQ(sessions.size(), 3u);
+  EXPECT_EQ(sessions[0].ended_wall_ns, 5000);
+  EXPECT_TRUE(sessions[0].interrupted);
+  EXPECT_STREQ(state_name(sessions[0]), "interrupted");
+  EXPECT_STREQ(state_name(sessions[1]), "interrupted");
+  EXPECT_EQ(sessions[2].id, ours);
+  EXPECT_STREQ(state_name(sessions[2]), "open") << "its writer, this process, runs";
+  EXPECT_EQ(sessions[2].writer, this_process());
+  // The interruption is an event at the session's last stored time, in the monotonic time of that row.
+  const auto events = store.events(1);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].kind, "interrupted");
+  EXPECT_EQ(events[1].wall_ns, 5000);
+  EXPECT_EQ(events[1].mono_ns, 70);
+  EXPECT_NE(events[1].detail.find("process " + std::to_string(sessions[0].writer->pid)), std::string::npos);
+  EXPECT_EQ(store.events(2).back().mono_ns, 80);
+
+  EXPECT_TRUE(store.end_interrupted_sessions().empty()) << "each is ended once";
+  EXPECT_EQ(store.events(1).size(), 2u);
+}
+
+TEST_F(StoreTest, AWriterIsTakenForDeadAfterARebootOrWhenItsPidNowNamesAnotherProcess) {
+  {
+    Store store(path_);
+    for (int i = 0; i < 3; ++i) store.begin_session({.kind = "live", .started_wall_ns = 1000 + i});
+  }
+  // All three name this process, which runs; what an identity from another boot, or from an earlier holder of our
+  // pid, would look like:
+  execute(path_, "UPDATE sessions SET writer_boot_id = 'another boot' WHERE id = 1");
+  execute(path_, "UPDATE sessions SET writer_start_ticks = writer_start_ticks - 1 WHERE id = 2");
+  Store store(path_);
+  const auto ended = store.end_interrupted_sessions();
+  ASSERT_EQ(ended.size(), 2u);
+  EXPECT_EQ(ended[0].session, 1);
+  EXPECT_EQ(ended[0].ended_wall_ns, 1000) << "no rows: it ends where it started";
+  EXPECT_EQ(ended[1].session, 2);
+  EXPECT_STREQ(state_name(store.sessions()[2]), "open");
+}
+
+TEST_F(StoreTest, AFileOfSchemaVersion1OpensReadOnlyAsItIsAndReadWriteUpgraded) {
+  {
+    Database db(path_, false);
+    migrate(db, migrations().first(1));
+    db.exec(
+        "INSERT INTO sessions (kind, source, started_wall_ns, config, software_version) "
+        "VALUES ('live', 'old', 10, '{}', '0.9')");
+  }
+  const std::vector<char> before = file_bytes(path_);
+  {
+    const Store reader(path_, {.read_only = true});
+    const auto sessions = reader.sessions();
+    ASSERT_EQ(sessions.size(), 1u);
+    EXPECT_EQ(sessions[0].info.source, "old");
+    EXPECT_FALSE(sessions[0].writer.has_value());
+    EXPECT_STREQ(state_name(sessions[0]), "open");
+  }
+  EXPECT_EQ(file_bytes(path_), before);
+  Store store(path_);
+  EXPECT_EQ(query(path_, "PRAGMA user_version"), "2");
+  EXPECT_TRUE(store.end_interrupted_sessions().empty()) << "no writer recorded: nothing says it died";
+  EXPECT_STREQ(state_name(store.sessions()[0]), "open");
+}
+
+// Hypothetical schema versions 1 and 2, to exercise the mechanism apart from this build's steps.
 constexpr MigrationStep kSteps[] = {
     [](Database& db) { db.exec("CREATE TABLE t (x INTEGER)"); },
     [](Database& db) { db.exec("ALTER TABLE t ADD COLUMN y TEXT DEFAULT 'two'"); },
