@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 #include <sys/statvfs.h>
 
+#include <algorithm>
 #include <boost/asio/post.hpp>
 #include <csignal>
 #include <ctime>
@@ -33,6 +34,22 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 constexpr double kMiB = 1024.0 * 1024.0;
+// While not recording, free space is looked at this often; recording resumes once there is min_free_mib plus
+// kResumeMargin (a tenth of min_free_mib, at least kMinResumeMargin) free, so usage hovering at the floor does not
+// start and stop a session at every check.
+constexpr auto kStorageRetryInterval = std::chrono::seconds(5);
+constexpr std::uint64_t kMinResumeMargin = 16ull << 20;
+std::uint64_t resume_margin(std::uint64_t min_free_bytes) { return std::max(kMinResumeMargin, min_free_bytes / 10); }
+// A store that keeps failing where free space looks fine (a quota, a file size limit) is tried less and less often:
+// the first stop is retried at the next look, the n-th stop or failed resume in a row (n >= 2) waits
+// kStorageRetryInterval * 2^(n-2) more, at most kMaxResumeDelay. A recording that lasted kSteadyRecording ends the row.
+constexpr auto kMaxResumeDelay = std::chrono::minutes(5);
+constexpr auto kSteadyRecording = std::chrono::minutes(1);
+Clock::duration resume_delay(int failures_in_a_row) {
+  if (failures_in_a_row <= 1) return Clock::duration::zero();
+  const Clock::duration delay = kStorageRetryInterval * (1 << std::min(failures_in_a_row - 2, 6));
+  return std::min<Clock::duration>(delay, kMaxResumeDelay);
+}
 
 std::int64_t mono_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
@@ -124,6 +141,10 @@ struct Daemon::Recording {
   fs::path path;
   store::Store store;
   std::int64_t session = 0, run = 0;
+  Clock::time_point since = Clock::now();
+
+  // As notes name it in the session that continues it: "imubridge.db session 4".
+  std::string name() const { return fmt::format("{} session {}", path.filename().string(), session); }
 };
 
 struct Daemon::Link {
@@ -156,7 +177,8 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       commit_timer_(io_),
       stats_timer_(io_),
-      watchdog_timer_(io_) {
+      watchdog_timer_(io_),
+      resume_timer_(io_) {
   signals_.add(SIGUSR1);
   // Each link's declared IMU axes; XBee radios (ids with the top bit) take their link's. Detection reports once per
   // link: a declaration the data contradict is logged and recorded as an event.
@@ -205,7 +227,13 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     if (link_config.feedback.enabled) l.feedback.emplace(link_config.format, link_config.feedback);
     links_.push_back(std::move(link));
   }
-  open_recording(config_.store.path, "");
+  if (auto problem = storage_problem()) {
+    spdlog::error("not recording: {}", *problem);
+    not_recording_ = NotRecording{.path = config_.store.path, .previous = "", .reason = *problem};
+    use_decoders();
+  } else {
+    open_recording(config_.store.path, "");  // a store that cannot be opened at start is fatal
+  }
 }
 
 Daemon::~Daemon() = default;
@@ -215,6 +243,7 @@ int Daemon::run() {
   wait_for_signal();
   every(commit_timer_, config_.store.commit_interval, &Daemon::commit_tick);
   every(stats_timer_, config_.stats_interval, &Daemon::stats_tick);
+  every(resume_timer_, kStorageRetryInterval, &Daemon::resume_tick);
   // From the event loop, so a loop stuck for WatchdogSec is what systemd restarts.
   if (auto period = systemd_.watchdog_period()) every(watchdog_timer_, *period, &Daemon::watchdog_tick);
   systemd_.ready(status_line());
@@ -229,12 +258,7 @@ void Daemon::stop() {
 
 // --- Recording ---------------------------------------------------------------------------------------------------
 
-void Daemon::open_recording(const fs::path& path, const std::string& continues) {
-  if (auto problem = storage_problem()) {
-    spdlog::error("not recording: {}", *problem);
-    use_decoders();
-    return;
-  }
+void Daemon::open_recording(const fs::path& path, const std::string& note) {
   auto r = std::make_unique<Recording>(path, config_.store);
   const std::int64_t wall = wall_now_ns();
   nlohmann::json snapshot{{"imubridge_run", to_toml(config_)}};
@@ -247,23 +271,39 @@ void Daemon::open_recording(const fs::path& path, const std::string& continues) 
   }
   source.pop_back();
   pipeline::add_recorded_links(snapshot, recorded);
+  // Sessions a killed or crashed daemon left open in this file: ended, as interrupted, before ours begins.
+  for (const store::InterruptedSession& s : r->store.end_interrupted_sessions()) {
+    spdlog::warn(
+        "session {} in {} was left open by process {}, which has ended: marked interrupted at its last "
+        "stored time",
+        s.session, path.string(), s.writer.pid);
+  }
   r->session =
       r->store.begin_session({.kind = "live", .source = source, .config = snapshot.dump(), .started_wall_ns = wall});
-  if (!continues.empty()) {
-    r->store.append_event(
-        r->session, {.mono_ns = mono_now_ns(), .wall_ns = wall, .kind = "note", .detail = "continues " + continues});
-  }
   std::vector<std::int64_t> ids;
   std::vector<std::unique_ptr<pipeline::LinkRecorder>> recorders;
-  for (const auto& link : links_) {
-    const LinkConfig& c = link->config;
-    ids.push_back(r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
-                                    fmt::format("{} @ {} baud", describe(c.device), c.baud)));
-    recorders.push_back(
-        std::make_unique<pipeline::LinkRecorder>(r->store, r->session, ids.back(), c.name, c.format, c.calibration));
+  try {
+    if (!note.empty()) {
+      r->store.append_event(r->session, {.mono_ns = mono_now_ns(), .wall_ns = wall, .kind = "note", .detail = note});
+    }
+    for (const auto& link : links_) {
+      const LinkConfig& c = link->config;
+      ids.push_back(r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
+                                      fmt::format("{} @ {} baud", describe(c.device), c.baud)));
+      recorders.push_back(
+          std::make_unique<pipeline::LinkRecorder>(r->store, r->session, ids.back(), c.name, c.format, c.calibration));
+    }
+    r->run = r->store.begin_run(
+        r->session, {.kind = "live", .params_json = nlohmann::json(params_).dump(), .created_wall_ns = wall});
+  } catch (const store::StoreError&) {
+    // A session that began is ended if the store still allows it: an open one would look recorded to the end.
+    recorders.clear();
+    try {
+      r->store.end_session(r->session, wall);
+    } catch (const store::StoreError&) {
+    }
+    throw;
   }
-  r->run = r->store.begin_run(r->session,
-                              {.kind = "live", .params_json = nlohmann::json(params_).dump(), .created_wall_ns = wall});
   // Nothing below throws: every link switches to the new file, or (above) none does.
   for (std::size_t i = 0; i < links_.size(); ++i) {
     links_[i]->retire_decoder();
@@ -272,10 +312,12 @@ void Daemon::open_recording(const fs::path& path, const std::string& continues) 
   }
   // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
   estimation_ = std::make_unique<pipeline::EstimationStage>(params_, *estimation_->axes());
-  spdlog::info("recording session {} into {}{}", r->session, path.string(),
+  spdlog::info("recording session {} into {}{}{}", r->session, path.string(),
                config_.params ? " with parameters from " + config_.params->string()
-                              : " (no parameters: velocity is not estimated)");
+                              : " (no parameters: velocity is not estimated)",
+               note.empty() ? "" : "; " + note);
   recording_ = std::move(r);
+  not_recording_.reset();
 }
 
 // Ends the session as cleanly as the store still allows. The decoders' last frames are recorded and estimated (they
@@ -318,15 +360,40 @@ void Daemon::use_decoders() {
   }
 }
 
-void Daemon::stop_recording(const std::string& reason) {
-  spdlog::error("recording stopped: {}; links and outputs go on", reason);
+void Daemon::stop_recording(NotRecording why) {
+  spdlog::error("recording stopped: {}; links and outputs go on", why.reason);
+  const bool steady = recording_ && Clock::now() - recording_->since >= kSteadyRecording;
+  failures_in_a_row_ = steady ? 1 : failures_in_a_row_ + 1;
+  next_resume_ = Clock::now() + resume_delay(failures_in_a_row_);
   close_recording();
+  not_recording_ = std::move(why);
+  systemd_.status(status_line());
+}
+
+Daemon::NotRecording Daemon::stopping_here(const std::string& reason, bool resumes) const {
+  return {.path = recording_->path, .previous = recording_->name(), .reason = reason, .resumes = resumes};
+}
+
+void Daemon::resume_tick() {
+  if (recording_ || !not_recording_ || !not_recording_->resumes || Clock::now() < next_resume_) return;
+  const std::uint64_t wanted = config_.store.min_free_bytes + resume_margin(config_.store.min_free_bytes);
+  if (auto free = free_bytes(); free && *free < wanted) return;
+  const NotRecording why = *not_recording_;  // open_recording() clears it
+  const std::string note = why.previous.empty() ? "starts late: at start " + why.reason
+                                                : "resumes after " + why.previous + ", which stopped: " + why.reason;
+  try {
+    open_recording(why.path, note);  // a disk still full fails here, and is tried again at the next tick
+  } catch (const store::StoreError& e) {
+    spdlog::debug("recording cannot resume yet: {}", e.what());
+    next_resume_ = Clock::now() + resume_delay(++failures_in_a_row_);
+    return;
+  }
   systemd_.status(status_line());
 }
 
 void Daemon::rotate() {
   const fs::path next = rotated_path(config_.store.path);
-  const std::string previous = fmt::format("{} session {}", recording_->path.filename().string(), recording_->session);
+  const std::string previous = recording_->name();
   spdlog::info("{} reached store.max_size_mib ({}): continuing in {}", recording_->path.string(),
                mib(config_.store.max_size_bytes), next.string());
   record([&](Recording& r) {
@@ -338,30 +405,39 @@ void Daemon::rotate() {
   if (!recording_) return;  // that write failed: recording has stopped
   close_recording();
   ++rotations_;
+  if (auto problem = storage_problem()) {
+    return stop_recording({.path = next, .previous = previous, .reason = *problem});
+  }
   try {
-    open_recording(next, previous);
+    open_recording(next, "continues " + previous);
   } catch (const store::StoreError& e) {
-    stop_recording(e.what());
+    stop_recording({.path = next, .previous = previous, .reason = e.what()});
   }
 }
 
-std::optional<std::string> Daemon::storage_problem() const {
+std::optional<std::uint64_t> Daemon::free_bytes() const {
   const fs::path dir = fs::absolute(config_.store.path).parent_path();
   struct statvfs vfs {};
   if (::statvfs(dir.c_str(), &vfs) != 0) return std::nullopt;  // a missing directory: opening the store says so
-  const auto free = static_cast<std::uint64_t>(vfs.f_bavail) * vfs.f_frsize;
-  if (free >= config_.store.min_free_bytes) return std::nullopt;
-  return fmt::format("only {} free on {}, below store.min_free_mib ({})", mib(free), dir.string(),
-                     mib(config_.store.min_free_bytes));
+  return static_cast<std::uint64_t>(vfs.f_bavail) * vfs.f_frsize;
+}
+
+std::optional<std::string> Daemon::storage_problem() const {
+  const auto free = free_bytes();
+  if (!free || *free >= config_.store.min_free_bytes) return std::nullopt;
+  return fmt::format("only {} free on {}, below store.min_free_mib ({})", mib(*free),
+                     fs::absolute(config_.store.path).parent_path().string(), mib(config_.store.min_free_bytes));
 }
 
 void Daemon::check_storage() {
   if (!recording_) return;
-  if (auto problem = storage_problem()) return stop_recording(*problem);
+  if (auto problem = storage_problem()) return stop_recording(stopping_here(*problem));
   const std::uint64_t cap = config_.store.max_size_bytes;
   if (cap == 0 || database_size(recording_->path) < cap) return;
   if (config_.store.on_full == StoreConfig::OnFull::rotate) return rotate();
-  stop_recording(fmt::format("{} reached store.max_size_mib ({})", recording_->path.string(), mib(cap)));
+  // Resuming would find the file at its cap again.
+  stop_recording(stopping_here(fmt::format("{} reached store.max_size_mib ({})", recording_->path.string(), mib(cap)),
+                               /*resumes=*/false));
 }
 
 template <typename Write>
@@ -370,7 +446,7 @@ void Daemon::record(Write&& write) {
   try {
     write(*recording_);
   } catch (const store::StoreError& e) {
-    stop_recording(e.what());
+    stop_recording(stopping_here(e.what()));
   }
 }
 
@@ -409,7 +485,7 @@ void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
     try {
       link.recorder->on_chunk(bytes, mono, wall, samples_);
     } catch (const store::StoreError& e) {
-      stop_recording(e.what());
+      stop_recording(stopping_here(e.what()));
       samples_.clear();
       link.decoder->feed(bytes, mono, samples_);
     }
@@ -470,8 +546,9 @@ void Daemon::wait_for_signal() {
   });
 }
 
-// SIGHUP: the outputs and logging settings of the configuration file take effect, and the log file is reopened
-// (after logrotate moved it). Links and the store keep running as they are: changing them needs a restart.
+// SIGHUP: the outputs, logging and free-space settings of the configuration file take effect, and the log file is
+// reopened (after logrotate moved it). Links and the rest of the store keep running as they are: changing them needs
+// a restart.
 void Daemon::reload() {
   if (config_file_) {
     try {
@@ -480,6 +557,7 @@ void Daemon::reload() {
       config_.outputs = fresh.outputs;
       config_.log_level = fresh.log_level;
       config_.log_file = fresh.log_file;
+      config_.store.min_free_bytes = fresh.store.min_free_bytes;  // the next check of free space applies it
     } catch (const std::exception& e) {
       spdlog::error("SIGHUP: {}; keeping the running configuration", e.what());
     }
@@ -530,15 +608,23 @@ void Daemon::shutdown() {
   commit_timer_.cancel();
   stats_timer_.cancel();
   watchdog_timer_.cancel();
+  resume_timer_.cancel();
   close_recording();
   log_stats();
   io_.stop();
 }
 
 std::string Daemon::status_line() const {
-  std::string status = recording_
-                           ? fmt::format("recording session {} into {}", recording_->session, recording_->path.string())
-                           : std::string("NOT recording");
+  std::string status =
+      recording_ ? fmt::format("recording session {} into {}", recording_->session, recording_->path.string())
+      : not_recording_
+          ? fmt::format(
+                "not recording: {}; links and outputs go on{}", not_recording_->reason,
+                not_recording_->resumes
+                    ? fmt::format(" (resumes once {} is free)",
+                                  mib(config_.store.min_free_bytes + resume_margin(config_.store.min_free_bytes)))
+                    : "")
+          : std::string("not recording");
   for (const auto& link : links_) {
     status += fmt::format("; {} {} ({} samples)", link->config.name,
                           link->port->is_open() ? link->port->path() : "waiting for " + describe(link->config.device),

@@ -60,11 +60,26 @@ class Daemon {
   struct Link;
   struct Recording;
 
-  void open_recording(const std::filesystem::path& path, const std::string& continues);
+  // Why the daemon is not recording, and where it records again once it can.
+  struct NotRecording {
+    std::filesystem::path path;  // the file recording resumes into
+    std::string previous;        // the session that stopped, "run.db session 3"; empty if none began
+    std::string reason;
+    bool resumes = true;  // false once a file reached store.max_size_mib with on_full = "stop"
+  };
+
+  // Begins a session in `path`, its first event a note `note` (if any) saying what it continues. Throws StoreError,
+  // leaving the daemon as it was.
+  void open_recording(const std::filesystem::path& path, const std::string& note);
   void close_recording();
-  void stop_recording(const std::string& reason);
+  // Ends the recording, if any; the links and outputs go on without one.
+  void stop_recording(NotRecording why);
+  NotRecording stopping_here(const std::string& reason, bool resumes = true) const;
   void rotate();
   void check_storage();
+  // Every kStorageRetryInterval while not recording: records again once it can.
+  void resume_tick();
+  std::optional<std::uint64_t> free_bytes() const;
   std::optional<std::string> storage_problem() const;
   // Runs a store write; a failure ends the recording, never the daemon.
   template <typename Write>
@@ -93,13 +108,16 @@ class Daemon {
   estimator::ModelParams params_;
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
-  boost::asio::steady_timer commit_timer_, stats_timer_, watchdog_timer_;
+  boost::asio::steady_timer commit_timer_, stats_timer_, watchdog_timer_, resume_timer_;
   SystemdNotifier systemd_;
   std::unique_ptr<Outputs> outputs_;
-  std::unique_ptr<Recording> recording_;  // none once recording stopped (disk full, write error)
+  std::unique_ptr<Recording> recording_;       // none while not recording (free space short, disk full, write error)
+  std::optional<NotRecording> not_recording_;  // while recording_ is null
+  int failures_in_a_row_ = 0;                  // stops and failed resumes: they space the next resume
+  std::chrono::steady_clock::time_point next_resume_{};
   std::unique_ptr<pipeline::EstimationStage> estimation_;
   std::vector<std::unique_ptr<Link>> links_;
-  std::vector<protocol::Sample> samples_;  // of the chunk being processed: reused, so a chunk allocates nothing
+  std::vector<protocol::Sample> samples_;   // of the chunk being processed: reused, so a chunk allocates nothing
   std::vector<store::Estimate> estimates_;  // of the sample being processed: reused likewise
   std::uint64_t commits_ = 0, rotations_ = 0;
   bool stopping_ = false;

@@ -1,5 +1,6 @@
 #include "replay/session_lookup.hpp"
 
+#include <cstdio>
 #include <stdexcept>
 #include <vector>
 
@@ -20,6 +21,18 @@ store::Session find_session(const store::Store& store, std::int64_t session) {
   }
   throw std::invalid_argument("no session " + std::to_string(session) + " in the store" +
                               (ids.empty() ? " (it has none)" : " (its sessions: " + format_ranges(ids) + ")"));
+}
+
+std::string describe_state(const store::Session& session) {
+  const std::string head = "session " + std::to_string(session.id) + ": " + store::state_name(session);
+  if (!session.ended_wall_ns) return head + " (being written, or its writer's end is not known yet)";
+  char seconds[32];
+  std::snprintf(seconds, sizeof seconds, "%.1f s",
+                static_cast<double>(*session.ended_wall_ns - session.info.started_wall_ns) * 1e-9);
+  if (!session.interrupted) return head + " after " + seconds;
+  const std::string writer = session.writer ? ", process " + std::to_string(session.writer->pid) + "," : "";
+  return head + " (its writer" + writer + " ended without ending it; it ends at its last stored time, " + seconds +
+         " after its start)";
 }
 
 store::Run find_run(const store::Store& store, std::int64_t session, std::int64_t run) {

@@ -2,6 +2,7 @@
 #include "replay/export.hpp"
 
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <optional>
@@ -25,6 +26,7 @@ int run_export(const ExportCommandOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const auto table = replay::parse_export_table(o.what);
   const auto format = replay::parse_export_format(o.format);
+  std::fprintf(stderr, "%s\n", replay::describe_state(replay::find_session(store, o.session)).c_str());
   if (o.out.empty()) {
     std::ios::sync_with_stdio(false);
     replay::export_table(store, o.session, table, o.run, format, std::cout);

@@ -133,6 +133,7 @@ void print_losses(const replay::ReplayResult& r) {
 int replay_into_run(const ReplayCommandOptions& o) {
   store::Store store(o.db);
   const store::Session session = replay::find_session(store, o.session);
+  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());
   replay::ReplayOptions options;
   if (!o.params.empty()) options.params = replay::parse_params(read_file(o.params), o.params);
   options.play = {.from_s = o.from_s, .to_s = o.to_s, .speed = parse_speed(o.speed.empty() ? "max" : o.speed)};
@@ -158,6 +159,7 @@ int replay_into_run(const ReplayCommandOptions& o) {
 int replay_to_pty(const ReplayCommandOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const store::Session session = replay::find_session(store, o.session);
+  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());
   const replay::PlayOptions play{.from_s = o.from_s,
                                  .to_s = o.to_s,
                                  .speed = parse_speed(o.speed.empty() ? "1" : o.speed),
