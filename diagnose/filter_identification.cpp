@@ -104,7 +104,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
     }
   }
   if (!drag.empty()) model.scan_drag_start(start, drag, train);
-  const FitOutcome fit = diagnose::fit(model, start, train);
+  const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::kParameterPrecision);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 
   estimator::IdentifyResult result;

@@ -14,6 +14,7 @@
 #include "estimator/drag_law.hpp"
 #include "estimator/full_model.hpp"
 #include "estimator/least_squares.hpp"
+#include "estimator/precise_solve.hpp"
 #include "estimator/velocity.hpp"
 
 namespace imubridge::diagnose {
@@ -539,7 +540,7 @@ class RecordCost final : public ceres::IterationCallback {
 
 }  // namespace
 
-FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations) {
+FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations, FitStop stop) {
   const std::vector<Parameter>& params = model.parameters();
   if (start.size() != params.size()) throw std::invalid_argument("diagnose fit: wrong number of starting values");
   const std::size_t axes = model.setup().axes.size();
@@ -583,7 +584,15 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   RecordCost record(out.convergence);
   options.callbacks.push_back(&record);
   ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
+  if (stop == FitStop::kParameterPrecision) {
+    // A comparison low-passed at f_c leaves 2 f_c / f_s of the samples independent.
+    const ModelSetup& setup = model.setup();
+    const double band =
+        setup.lowpass_hz > 0.0 ? std::min(1.0, 2.0 * setup.lowpass_hz / model.signals().rate_hz) : 1.0;
+    summary = estimator::solve_to_precision(problem, options, static_cast<double>(residual_count) * band);
+  } else {
+    ceres::Solve(options, &problem, &summary);
+  }
   out.iterations = static_cast<int>(summary.iterations.size()) - 1;
   out.converged = summary.termination_type == ceres::CONVERGENCE;
 

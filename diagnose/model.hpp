@@ -115,8 +115,14 @@ struct FitOutcome {
   bool converged = false;
 };
 
+// How far LM goes: until a relative cost change of 1e-7, as diagnose needs to compare candidates by the costs they
+// reach (the F-test), or until the parameters are within a third of a standard error of the optimum
+// (estimator/precise_solve.hpp), which is all a fit that reports parameters can tell (identify).
+enum class FitStop { kCost, kParameterPrecision };
+
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
 // ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does.
-FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50);
+FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50,
+               FitStop stop = FitStop::kCost);
 
 }  // namespace imubridge::diagnose

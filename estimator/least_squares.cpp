@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "estimator/constants.hpp"
+#include "estimator/precise_solve.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -209,10 +210,11 @@ FullFit fit_full_lm(std::span<const FullSample> samples, const FullModelParams& 
   ceres::Solver::Summary summary;
   // The 3-D model's valley between its two drag laws, with one of them on its bound 0, takes LM a hundred projected
   // steps of 1e-7 of the cost each after it has converged to the 6th digit (on the real EuRoC flight: from the 4th
-  // iteration on). Those decide nothing, and were nearly all of identify's time.
+  // iteration on). Those decide nothing, and were nearly all of identify's time: it stops at the precision its
+  // standard errors have (two residuals per sample).
   ceres::Solver::Options options = solver_options();
   options.function_tolerance = 1e-7;
-  ceres::Solve(options, &problem, &summary);
+  summary = solve_to_precision(problem, options, 2.0 * static_cast<double>(samples.size()));
   return {p, report_of(summary)};
 }
 
