@@ -1,7 +1,9 @@
 #include "store/process_identity.hpp"
 
+#include <signal.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <fstream>
 #include <sstream>
 
@@ -52,8 +54,13 @@ bool is_running(const ProcessIdentity& writer) {
   if (boot_id.empty()) return true;  // no /proc to ask: never take a writer for dead on no evidence
   if (writer.boot_id != boot_id) return false;
   const auto stat = proc_stat(writer.pid);
+  if (!stat) {
+    // Another user's process is invisible in /proc under hidepid (the unit's ProtectProc=invisible), but a signal 0
+    // still tells a pid that is in use (EPERM) from one that is not: in use, whether it is the writer cannot be told.
+    return ::kill(static_cast<pid_t>(writer.pid), 0) == 0 || errno == EPERM;
+  }
   // A zombie (Z, or X while it is reaped) has ended; only its parent has not collected its status yet.
-  return stat && stat->start_ticks == writer.start_ticks && stat->state != 'Z' && stat->state != 'X';
+  return stat->start_ticks == writer.start_ticks && stat->state != 'Z' && stat->state != 'X';
 }
 
 }  // namespace imubridge::store

@@ -20,7 +20,7 @@ struct ProcessIdentity {
 // This process's identity; nothing where /proc does not tell it (then its sessions are never taken for dead).
 std::optional<ProcessIdentity> this_process();
 // Whether the process `writer` names still runs: false once its machine rebooted, its pid is gone or now names a
-// process started at another time.
+// process started at another time. A pid in use by a process /proc hides from us (hidepid) counts as running.
 bool is_running(const ProcessIdentity& writer);
 
 }  // namespace imubridge::store
