@@ -18,11 +18,9 @@ constexpr std::uint64_t kVerticalPlanStream = 3;
 Flight::Flight(const FlightConfig& config, double duration_s, std::uint64_t seed)
     : vehicle_(config.vehicle, config.air),
       controller_(vehicle_, config.gains, Eigen::Vector3d(0.0, 0.0, -config.start_altitude_m)),
+      plan_(config.manoeuvres, config.vertical, duration_s, Rng::stream(seed, kPlanStream),
+            Rng::stream(seed, kVerticalPlanStream)),
       dt_(1.0 / config.physics_rate_hz) {
-  Rng rng = Rng::stream(seed, kPlanStream);
-  plan_ = plan_manoeuvres(config.manoeuvres, duration_s, rng);
-  Rng vertical_rng = Rng::stream(seed, kVerticalPlanStream);
-  plan_.height = plan_vertical_manoeuvres(config.vertical, duration_s, vertical_rng);
   const RigidState start = vehicle_.hover_at({0.0, 0.0, -config.start_altitude_m});
   nodes_.push_back({start, controller_.rotor_command(start, plan_.at(0.0))});
 }
@@ -68,6 +66,7 @@ void Flight::forget_before(double t) {
     nodes_.pop_front();
     ++first_index_;
   }
+  plan_.forget_before(static_cast<double>(first_index_) * dt_);  // the plan is only read ahead of the kept nodes
 }
 
 }  // namespace imubridge::sim

@@ -44,10 +44,10 @@ class Flight {
   // The true state at time t (s). Before t = 0 the vehicle is taken to be in its initial state. Times may go
   // back, but not before the last forget_before().
   TrueState at(double t);
-  // Releases the history before t; a streaming caller keeps memory bounded with it.
+  // Releases the history (and the flight plan) before t; a streaming caller keeps memory bounded with it.
   void forget_before(double t);
 
-  const Trajectory& plan() const { return plan_; }
+  FlightPlan& plan() { return plan_; }
 
  private:
   struct Node {
@@ -58,7 +58,7 @@ class Flight {
 
   Quadrotor vehicle_;
   Controller controller_;
-  Trajectory plan_;
+  FlightPlan plan_;
   double dt_;
   std::deque<Node> nodes_;
   std::int64_t first_index_ = 0;  // grid index of nodes_.front()

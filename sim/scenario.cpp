@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -43,8 +44,11 @@ SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional
     throw std::invalid_argument("unknown scenario \"" + std::string(name) + "\"; valid scenarios:" + valid);
   }
   if (duration_s) {
-    if (!std::isfinite(*duration_s) || *duration_s <= 0.0) {
-      throw std::invalid_argument("scenario duration must be positive and finite, got " + std::to_string(*duration_s));
+    if (!(*duration_s > 0.0 && *duration_s <= kMaxDurationS)) {
+      std::ostringstream message;
+      message << "the flight's duration must be more than 0 and at most " << kMaxDurationS << " s (24 h), got "
+              << *duration_s << " s";
+      throw std::invalid_argument(message.str());
     }
     config.duration_s = *duration_s;
   }

@@ -27,8 +27,12 @@ inline constexpr double kPaperMu = 0.0386;
 
 std::span<const std::string_view> scenario_names();
 
+// The longest flight a scenario flies: a day. The simulator streams, so memory does not limit it; the time to
+// compute it does (a day's flight takes minutes).
+inline constexpr double kMaxDurationS = 24 * 3600.0;
+
 // Throws std::invalid_argument for an unknown name (listing the valid ones), a duration that is not positive and
-// finite, or a bad effect (see effects.hpp). Without a duration the scenario's own is used.
+// at most kMaxDurationS, or a bad effect (see effects.hpp). Without a duration the scenario's own is used.
 SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional<double> duration_s = std::nullopt,
                         std::span<const std::string> effects = {});
 

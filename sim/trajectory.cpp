@@ -18,11 +18,18 @@ CosineCurve::Point CosineCurve::at(double t) const {
   if (next == knots_.end()) return {knots_.back().second, 0.0, 0.0};
   const auto& [t0, y0] = *std::prev(next);
   const auto& [t1, y1] = *next;
+  if (y1 == y0) return {y0, 0.0, 0.0};
   // y = y0 + (y1 - y0) * (1 - cos(w * (t - t0))) / 2 with w = pi / (t1 - t0).
   const double w = std::numbers::pi / (t1 - t0);
   const double half_step = (y1 - y0) / 2;
   const double phase = w * (t - t0);
   return {y0 + half_step * (1 - std::cos(phase)), half_step * w * std::sin(phase), half_step * w * w * std::cos(phase)};
+}
+
+void CosineCurve::forget_before(double t) {
+  const auto next = std::upper_bound(knots_.begin(), knots_.end(), t,
+                                     [](double time, const auto& knot) { return time < knot.first; });
+  if (next - knots_.begin() > 1) knots_.erase(knots_.begin(), std::prev(next));
 }
 
 namespace {
@@ -59,16 +66,19 @@ struct Manoeuvre {
   }
 };
 
-// Manoeuvres one after another from `first_start_s`, gaps of [gap_min, gap_max) between them, until one would end
-// later than 1 s before the flight's end. `draw(rng)` gives the next manoeuvre and the curve it goes on.
+// One step of a plan: manoeuvres follow one another from the lead-in, gaps of [gap_min, gap_max) apart, until one
+// would end later than 1 s before the flight's end. Draws the next (`draw(rng)` gives it and the curve it goes on)
+// and puts it on its curve, moving `next_start_s` past it, or finds the plan `done`.
 template <typename Draw>
-void plan_sequence(double first_start_s, double gap_min_s, double gap_max_s, double duration_s, Rng& rng, Draw draw) {
-  for (double t = first_start_s;;) {
-    const auto [curve, m] = draw(rng);
-    if (t + m.length() > duration_s - 1.0) break;
-    m.append_to(*curve, t);
-    t += m.length() + rng.uniform(gap_min_s, gap_max_s);
+void draw_next(double& next_start_s, bool& done, double gap_min_s, double gap_max_s, double duration_s, Rng& rng,
+               Draw draw) {
+  const auto [curve, m] = draw(rng);
+  if (next_start_s + m.length() > duration_s - 1.0) {
+    done = true;
+    return;
   }
+  m.append_to(*curve, next_start_s);
+  next_start_s += m.length() + rng.uniform(gap_min_s, gap_max_s);
 }
 
 // A manoeuvre of random kind, sign, size in [size_min, size_max), swing, hold and cycle count, drawn in the order
@@ -85,31 +95,75 @@ Manoeuvre draw_manoeuvre(Rng& rng, double size_min, double size_max, double swin
   return m;
 }
 
+// The next roll or pitch manoeuvre, and the curve of `plan` it goes on.
+std::pair<CosineCurve*, Manoeuvre> draw_attitude(const ManoeuvreConfig& c, Trajectory& plan, Rng& rng) {
+  CosineCurve* curve = rng.uniform() < c.roll_share ? &plan.roll : &plan.pitch;
+  const Manoeuvre m = draw_manoeuvre(rng, c.amplitude_min_rad, c.amplitude_max_rad, c.swing_min_s, c.swing_max_s,
+                                     c.hold_min_s, c.hold_max_s);
+  return {curve, m};
+}
+
+// The next altitude manoeuvre.
+std::pair<CosineCurve*, Manoeuvre> draw_vertical(const VerticalManoeuvreConfig& c, CosineCurve& height, Rng& rng) {
+  Manoeuvre m =
+      draw_manoeuvre(rng, c.height_min_m, c.height_max_m, c.swing_min_s, c.swing_max_s, c.hold_min_s, c.hold_max_s);
+  // The largest swing (+A -> -A) peaks at A (pi / swing)^2.
+  m.swing = std::max(m.swing, std::numbers::pi * std::sqrt(std::abs(m.amplitude) / c.max_acceleration_mps2));
+  return {&height, m};
+}
+
 }  // namespace
 
 Trajectory plan_manoeuvres(const ManoeuvreConfig& c, double duration_s, Rng& rng) {
   Trajectory plan;
-  if (!c.enabled) return plan;
-  plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
-    CosineCurve* curve = r.uniform() < c.roll_share ? &plan.roll : &plan.pitch;
-    const Manoeuvre m = draw_manoeuvre(r, c.amplitude_min_rad, c.amplitude_max_rad, c.swing_min_s, c.swing_max_s,
-                                       c.hold_min_s, c.hold_max_s);
-    return std::pair{curve, m};
-  });
+  double next_start_s = c.first_start_s;
+  for (bool done = !c.enabled; !done;) {
+    draw_next(next_start_s, done, c.gap_min_s, c.gap_max_s, duration_s, rng,
+              [&](Rng& r) { return draw_attitude(c, plan, r); });
+  }
   return plan;
 }
 
 CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& c, double duration_s, Rng& rng) {
   CosineCurve height;
-  if (!c.enabled) return height;
-  plan_sequence(c.first_start_s, c.gap_min_s, c.gap_max_s, duration_s, rng, [&](Rng& r) {
-    Manoeuvre m =
-        draw_manoeuvre(r, c.height_min_m, c.height_max_m, c.swing_min_s, c.swing_max_s, c.hold_min_s, c.hold_max_s);
-    // The largest swing (+A -> -A) peaks at A (pi / swing)^2.
-    m.swing = std::max(m.swing, std::numbers::pi * std::sqrt(std::abs(m.amplitude) / c.max_acceleration_mps2));
-    return std::pair{&height, m};
-  });
+  double next_start_s = c.first_start_s;
+  for (bool done = !c.enabled; !done;) {
+    draw_next(next_start_s, done, c.gap_min_s, c.gap_max_s, duration_s, rng,
+              [&](Rng& r) { return draw_vertical(c, height, r); });
+  }
   return height;
+}
+
+FlightPlan::FlightPlan(const ManoeuvreConfig& manoeuvres, const VerticalManoeuvreConfig& vertical, double duration_s,
+                       Rng attitude_rng, Rng vertical_rng)
+    : manoeuvres_(manoeuvres),
+      vertical_(vertical),
+      duration_s_(duration_s),
+      attitude_{std::move(attitude_rng), manoeuvres.first_start_s, !manoeuvres.enabled},
+      altitude_{std::move(vertical_rng), vertical.first_start_s, !vertical.enabled} {}
+
+// Every manoeuvre starting at or before t is drawn, so the curves' knots around t are the whole plan's; a curve whose
+// next manoeuvre is still to come holds 0 until it, as the whole plan's does between its manoeuvres.
+void FlightPlan::draw_until(double t) {
+  while (!attitude_.done && attitude_.next_start_s <= t) {
+    draw_next(attitude_.next_start_s, attitude_.done, manoeuvres_.gap_min_s, manoeuvres_.gap_max_s, duration_s_,
+              attitude_.rng, [&](Rng& r) { return draw_attitude(manoeuvres_, drawn_, r); });
+  }
+  while (!altitude_.done && altitude_.next_start_s <= t) {
+    draw_next(altitude_.next_start_s, altitude_.done, vertical_.gap_min_s, vertical_.gap_max_s, duration_s_,
+              altitude_.rng, [&](Rng& r) { return draw_vertical(vertical_, drawn_.height, r); });
+  }
+}
+
+FlightReference FlightPlan::at(double t) {
+  draw_until(t);
+  return drawn_.at(t);
+}
+
+void FlightPlan::forget_before(double t) {
+  drawn_.roll.forget_before(t);
+  drawn_.pitch.forget_before(t);
+  drawn_.height.forget_before(t);
 }
 
 }  // namespace imubridge::sim

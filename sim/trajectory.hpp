@@ -2,6 +2,7 @@
 // The flight plan: roll and pitch angle references made of manoeuvres like the paper's laboratory flight
 // (doublets, sinusoid bursts, steps), with seeded random amplitudes, lengths and timing; optionally, the same kinds
 // of manoeuvre on the altitude (climbs and descents), which make the thrust vary.
+#include <cstddef>
 #include <utility>
 #include <vector>
 
@@ -20,9 +21,13 @@ class CosineCurve {
   };
   // Knot times must increase; a knot not later than the previous one is ignored.
   void add_knot(double t, double value);
-  // Before the first knot and after the last one the curve holds that knot's value.
+  // Before the first knot and after the last one the curve holds that knot's value, as it does between two knots
+  // of the same value: so a curve whose next knot is not known yet (FlightPlan) reads the same as the whole one.
   Point at(double t) const;
   double end_time() const { return knots_.empty() ? 0.0 : knots_.back().first; }
+  // Releases the knots that no time from t on needs: all before the last one at or before t.
+  void forget_before(double t);
+  std::size_t knot_count() const { return knots_.size(); }
 
  private:
   std::vector<std::pair<double, double>> knots_;
@@ -70,5 +75,35 @@ struct Trajectory {
 Trajectory plan_manoeuvres(const ManoeuvreConfig& config, double duration_s, Rng& rng);
 // The same for the altitude: the height curve, empty when disabled.
 CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& config, double duration_s, Rng& rng);
+
+// The plan of plan_manoeuvres() and plan_vertical_manoeuvres() (from the same generators, it reads the same at every
+// time), drawn as the flight reaches it and released behind it: a flight of any length holds only the manoeuvres
+// around the present.
+class FlightPlan {
+ public:
+  FlightPlan(const ManoeuvreConfig& manoeuvres, const VerticalManoeuvreConfig& vertical, double duration_s,
+             Rng attitude_rng, Rng vertical_rng);
+
+  // The reference at t; t must not go back before the last forget_before().
+  FlightReference at(double t);
+  void forget_before(double t);
+  // The curves as far as drawn (and not yet released).
+  const Trajectory& drawn() const { return drawn_; }
+
+ private:
+  // One generator's manoeuvres, drawn in order: every manoeuvre starting before next_start_s is on the curves.
+  struct Sequence {
+    Rng rng;
+    double next_start_s;
+    bool done;
+  };
+  void draw_until(double t);
+
+  ManoeuvreConfig manoeuvres_;
+  VerticalManoeuvreConfig vertical_;
+  double duration_s_;
+  Sequence attitude_, altitude_;
+  Trajectory drawn_;
+};
 
 }  // namespace imubridge::sim

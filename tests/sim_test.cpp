@@ -5,6 +5,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <complex>
 #include <cstdint>
@@ -190,21 +191,22 @@ TEST(SimFlight, ClimbsMakeTheThrustVaryAndTheAltitudeReturns) {
   const SimConfig agile_config = make_scenario("agile", 7, 40.0);
   Flight climbing(climb_config.flight, climb_config.duration_s, climb_config.seed);
   Flight level(agile_config.flight, agile_config.duration_s, agile_config.seed);
-  ASSERT_GT(climbing.plan().height.end_time(), 20.0);
-  EXPECT_EQ(level.plan().height.end_time(), 0.0);
 
   const Samples climb = simulate(climb_config), agile = simulate(agile_config);
   const auto thrust = [](const SimSample& s) { return -s.truth.specific_force.z(); };
   for (std::size_t i = 0; i < climb.size(); ++i) {
     const double t = climb[i].time_s;
-    ASSERT_EQ(climbing.plan().roll.at(t).value, level.plan().roll.at(t).value);
-    ASSERT_EQ(climbing.plan().pitch.at(t).value, level.plan().pitch.at(t).value);
+    const FlightReference climbing_reference = climbing.plan().at(t), level_reference = level.plan().at(t);
+    ASSERT_EQ(climbing_reference.roll.value, level_reference.roll.value);
+    ASSERT_EQ(climbing_reference.pitch.value, level_reference.pitch.value);
     const double height = -climb[i].truth.position_ned.z() - climb_config.flight.start_altitude_m;
-    ASSERT_NEAR(height, climbing.plan().height.at(t).value, 0.05) << "t=" << t;
+    ASSERT_NEAR(height, climbing_reference.height.value, 0.05) << "t=" << t;
     // The acceleration limit keeps the thrust well between free fall and the rotors' limit.
     ASSERT_GT(thrust(climb[i]), 0.4 * kGravity) << "t=" << t;
     ASSERT_LT(thrust(climb[i]), 2.0 * kGravity) << "t=" << t;
   }
+  ASSERT_GT(climbing.plan().drawn().height.end_time(), 20.0);
+  EXPECT_EQ(level.plan().drawn().height.end_time(), 0.0);
   EXPECT_NEAR(-climb.back().truth.position_ned.z(), climb_config.flight.start_altitude_m, 0.01);
   const double climb_spread = stddev_of(climb, thrust), agile_spread = stddev_of(agile, thrust);
   EXPECT_GT(climb_spread, 0.1 * kGravity) << "tens of per cent";
@@ -453,6 +455,15 @@ TEST(SimScenario, UnknownNameAndBadDurationAreRejected) {
   EXPECT_THROW(make_scenario("loop", 1), std::invalid_argument);
   EXPECT_THROW(make_scenario("paper", 1, 0.0), std::invalid_argument);
   EXPECT_THROW(make_scenario("paper", 1, NAN), std::invalid_argument);
+  EXPECT_EQ(make_scenario("paper", 1, kMaxDurationS).duration_s, 86400.0);
+  for (const double too_long : {std::nextafter(kMaxDurationS, INFINITY), 1e7, 1e300, double(INFINITY)}) {
+    try {
+      make_scenario("paper", 1, too_long);
+      ADD_FAILURE() << too_long << " s accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("at most 86400 s (24 h)"), std::string::npos) << e.what();
+    }
+  }
   for (std::string_view name : scenario_names()) EXPECT_NO_THROW(make_scenario(name, 1));
 }
 
@@ -523,6 +534,64 @@ TEST(SimTrajectory, VerticalManoeuvresStayInsideTheirHeightAndAcceleration) {
   EXPECT_GT(highest, config.height_min_m) << "climbs";
   config.enabled = false;
   EXPECT_EQ(plan_vertical_manoeuvres(config, 60.0, rng).end_time(), 0.0);
+}
+
+// --- Streaming ----------------------------------------------------------------------------------------------------
+
+std::uint64_t fnv1a(const std::vector<std::uint8_t>& bytes) {
+  std::uint64_t hash = 14695981039346656037ull;
+  for (const std::uint8_t b : bytes) hash = (hash ^ b) * 1099511628211ull;
+  return hash;
+}
+
+// The flight plan is drawn as the flight goes; the samples are bit for bit those of the plan drawn whole before the
+// flight, which is what the simulator did until then (the hashes are of its samples, every field).
+TEST(SimStreaming, AFlightIsBitIdenticalToOneWithItsPlanDrawnWhole) {
+  EXPECT_EQ(fnv1a(bytes_of(run("climb", 7, 30.0))), 0xe52d56ad304ad161ull);
+  EXPECT_EQ(fnv1a(bytes_of(run("paper", 3, 30.0))), 0x87eae43958f7af34ull);
+}
+
+TEST(SimStreaming, ThePlanDrawnAsTheFlightGoesReadsAsTheWholePlan) {
+  ManoeuvreConfig attitude;
+  attitude.roll_share = 0.5;
+  VerticalManoeuvreConfig vertical;
+  vertical.enabled = true;
+  Rng whole_attitude(9), whole_vertical(10);
+  const Trajectory whole = [&] {
+    Trajectory plan = plan_manoeuvres(attitude, 120.0, whole_attitude);
+    plan.height = plan_vertical_manoeuvres(vertical, 120.0, whole_vertical);
+    return plan;
+  }();
+  FlightPlan streamed(attitude, vertical, 120.0, Rng(9), Rng(10));
+  const auto same = [](const CosineCurve::Point& a, const CosineCurve::Point& b) {
+    return std::bit_cast<std::uint64_t>(a.value) == std::bit_cast<std::uint64_t>(b.value) &&
+           std::bit_cast<std::uint64_t>(a.rate) == std::bit_cast<std::uint64_t>(b.rate) &&
+           std::bit_cast<std::uint64_t>(a.acceleration) == std::bit_cast<std::uint64_t>(b.acceleration);
+  };
+  for (int i = 0; i <= 121'000; ++i) {
+    const double t = i * 1e-3;
+    const FlightReference a = streamed.at(t), b = whole.at(t);
+    ASSERT_TRUE(same(a.roll, b.roll) && same(a.pitch, b.pitch) && same(a.height, b.height)) << "t=" << t;
+    streamed.forget_before(t);
+  }
+}
+
+// A day's plan has tens of thousands of manoeuvres; the flight holds the few around the present.
+TEST(SimStreaming, TheFlightPlanHoldsOnlyThePresentHoweverLongTheFlight) {
+  const SimConfig config = make_scenario("climb", 1, kMaxDurationS);
+  Rng rng(1);
+  const std::size_t whole = plan_manoeuvres(config.flight.manoeuvres, kMaxDurationS, rng).pitch.knot_count();
+  FlightPlan plan(config.flight.manoeuvres, config.flight.vertical, kMaxDurationS, Rng(1), Rng(2));
+  std::size_t most = 0;
+  for (double t = 0; t < kMaxDurationS; t += 0.25) {
+    plan.at(t);
+    plan.forget_before(t);
+    const Trajectory& drawn = plan.drawn();
+    most = std::max(most, drawn.roll.knot_count() + drawn.pitch.knot_count() + drawn.height.knot_count());
+  }
+  EXPECT_GT(whole, 50'000u);
+  EXPECT_LT(most, 100u);
+  EXPECT_GT(plan.drawn().pitch.end_time(), kMaxDurationS - 30) << "the plan went on to the end";
 }
 
 }  // namespace

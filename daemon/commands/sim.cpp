@@ -1,8 +1,6 @@
 // `imubridge sim`: fly a simulated quadrotor and deliver its IMU stream — recorded as a session, written as an
 // EuRoC/ASL dataset or a capture file, or streamed live on a pseudo-terminal.
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
-
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -10,6 +8,8 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -42,6 +42,16 @@ struct SimOptions {
   std::string db, euroc, pty, file;
   std::string imu_axes = "frd";
 };
+
+// --pty's pace. Beyond these it stops meaning anything: at 0.001 a 200 Hz IMU already sends one sample every 5 s,
+// and at 1000 the longest flight streams in 90 s.
+constexpr double kMinSpeed = 0.001, kMaxSpeed = 1000.0;
+
+std::string format_number(double value) {
+  std::ostringstream text;
+  text << value;
+  return text.str();
+}
 
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void on_stop_signal(int) { g_stop = 1; }
@@ -85,7 +95,7 @@ struct AxesWriter {
 };
 
 nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
-  return {{"scenario", o.scenario},      {"seed", o.seed},         {"duration_s", config.duration_s},
+  return {{"scenario", o.scenario},        {"seed", o.seed},       {"duration_s", config.duration_s},
           {"rate_hz", config.imu.rate_hz}, {"effects", o.effects}, {"protocol", o.protocol}};
 }
 
@@ -98,9 +108,10 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   nlohmann::json description = describe(o, config);
   pipeline::add_recorded_links(description, {{"sim", format, config.imu.calibration, o.imu_axes}});
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
-  const std::int64_t session = store.begin_session(
-      {.kind = "sim", .source = "imubridge sim " + describe(o, config).dump(), .config = description.dump(),
-       .started_wall_ns = start_wall});
+  const std::int64_t session = store.begin_session({.kind = "sim",
+                                                    .source = "imubridge sim " + describe(o, config).dump(),
+                                                    .config = description.dump(),
+                                                    .started_wall_ns = start_wall});
   const std::int64_t link = store.add_link(session, "sim", o.protocol, "simulated IMU, scenario " + o.scenario);
   pipeline::LinkRecorder recorder(store, session, link, "sim", format, config.imu.calibration);
   sim::FrameEncoder encoder(format);
@@ -114,12 +125,12 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
     encoder.encode(in_axes(s), bytes);
     if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
     const auto& q = s.truth.attitude;
-    store.append_reference(session, {.t_ns = last_ns,
-                                     .position = {s.truth.position_ned.x(), s.truth.position_ned.y(),
-                                                  s.truth.position_ned.z()},
-                                     .quat_wxyz = {q.w(), q.x(), q.y(), q.z()},
-                                     .velocity = std::array{s.truth.velocity_ned.x(), s.truth.velocity_ned.y(),
-                                                            s.truth.velocity_ned.z()}});
+    store.append_reference(
+        session,
+        {.t_ns = last_ns,
+         .position = {s.truth.position_ned.x(), s.truth.position_ned.y(), s.truth.position_ned.z()},
+         .quat_wxyz = {q.w(), q.x(), q.y(), q.z()},
+         .velocity = std::array{s.truth.velocity_ned.x(), s.truth.velocity_ned.y(), s.truth.velocity_ned.z()}});
     store.commit_if_due(Clock::now());
   });
   bytes.clear();
@@ -167,14 +178,14 @@ int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
     const sim::SimSample s = in_axes(sample);
     const std::int64_t t = t0 + to_ns(s.time_s);
     const auto& m = s.measured;
-    imu << t << ',' << m.gyro.x() << ',' << m.gyro.y() << ',' << m.gyro.z() << ',' << m.accel.x() << ','
-        << m.accel.y() << ',' << m.accel.z() << '\n';
+    imu << t << ',' << m.gyro.x() << ',' << m.gyro.y() << ',' << m.gyro.z() << ',' << m.accel.x() << ',' << m.accel.y()
+        << ',' << m.accel.z() << '\n';
     const Eigen::Matrix3d ned_from_body = s.truth.attitude.toRotationMatrix();
     const Eigen::Vector3d p = zup_from_ned * (s.truth.position_ned + ned_from_body * r);
     const Eigen::Vector3d v = zup_from_ned * (s.truth.velocity_ned + ned_from_body * s.truth.omega.cross(r));
     const Eigen::Quaterniond q(zup_from_ned * ned_from_body * body_from_sensor);
-    truth << t << ',' << p.x() << ',' << p.y() << ',' << p.z() << ',' << q.w() << ',' << q.x() << ',' << q.y()
-          << ',' << q.z() << ',' << v.x() << ',' << v.y() << ',' << v.z() << ',' << errors.gyro_bias.x() << ','
+    truth << t << ',' << p.x() << ',' << p.y() << ',' << p.z() << ',' << q.w() << ',' << q.x() << ',' << q.y() << ','
+          << q.z() << ',' << v.x() << ',' << v.y() << ',' << v.z() << ',' << errors.gyro_bias.x() << ','
           << errors.gyro_bias.y() << ',' << errors.gyro_bias.z() << ',' << errors.accel_bias.x() << ','
           << errors.accel_bias.y() << ',' << errors.accel_bias.z() << '\n';
     ++n;
@@ -247,14 +258,17 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   }
   cmd->add_option("--scenario", o->scenario, scenarios + " (docs/simulator.md)")->capture_default_str();
   cmd->add_option("--seed", o->seed, "Random seed: same seed, same bytes")->capture_default_str();
-  cmd->add_option("--duration", o->duration_s, "Flight length in seconds (default: the scenario's)");
+  cmd->add_option(
+      "--duration", o->duration_s,
+      "Flight length in seconds, at most " + format_number(sim::kMaxDurationS) + " (24 h) (default: the scenario's)");
   cmd->add_option("--rate", o->rate_hz, "IMU sample rate in Hz (default: the scenario's)");
   cmd->add_option("--effect", o->effects, "Extra effect NAME=VALUE, repeatable (docs/simulator.md lists them)");
   cmd->add_option("--protocol", o->protocol, "Wire format for --db, --pty and --file")
       ->check(CLI::IsMember({"imubridge", "xbee", "xbee-escaped", "mavlink"}))
       ->capture_default_str();
-  cmd->add_option("--speed", o->speed, "Pace for --pty, as a multiple of real time")
-      ->check(CLI::PositiveNumber)
+  cmd->add_option("--speed", o->speed,
+                  "Pace for --pty, as a multiple of real time, from " + format_number(kMinSpeed) + " to " +
+                      format_number(kMaxSpeed))
       ->capture_default_str();
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes in the samples: frd, flu, x-up, x-down, y-up, y-down, R:r00,...,r22 or q:w,x,y,z "
@@ -275,6 +289,10 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   out->add_option("--file", o->file, "Write the wire bytes to this file");
   out->require_option(1);
   return [o] {
+    if (!(o->speed >= kMinSpeed && o->speed <= kMaxSpeed)) {
+      throw std::invalid_argument("--speed " + format_number(o->speed) + ": must be from " + format_number(kMinSpeed) +
+                                  " to " + format_number(kMaxSpeed) + " times real time");
+    }
     const sim::SimConfig config = make_config(*o);
     if (!o->db.empty()) return record_to_db(*o, config);
     if (!o->euroc.empty()) return write_euroc(*o, config);
