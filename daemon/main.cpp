@@ -1,15 +1,17 @@
 // imubridge: a ground-station daemon for quadrotor IMU streams. See README.md and docs/.
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
 #include <map>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 #include "daemon/command.hpp"
 #include "estimator/solver_logs.hpp"
+#include "store/report.hpp"
 
 namespace imubridge::cli {
 std::vector<CommandRegistration>& command_registry() {
@@ -21,6 +23,8 @@ std::vector<CommandRegistration>& command_registry() {
 int main(int argc, char** argv) {
   using namespace imubridge::cli;
   imubridge::estimator::route_solver_logs_to_spdlog();
+  // The store's background failures (a checkpoint on a full disk) belong in the daemon's log, with everything else.
+  imubridge::store::set_report_sink([](std::string_view line) { spdlog::error("store: {}", line); });
   CLI::App app{"imubridge " IMUBRIDGE_VERSION
                " - records quadrotor IMU serial streams into SQLite and estimates velocity from them"};
   app.require_subcommand(1);

@@ -1,8 +1,13 @@
 #include "store/sqlite.hpp"
 
 #include <sqlite3.h>
+#include <unistd.h>
 
+#include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <limits>
+#include <system_error>
 #include <utility>
 
 namespace imubridge::store {
@@ -11,9 +16,50 @@ namespace {
 // A second writer on the same file (rare: one daemon records a file) gets this long to finish its transaction.
 constexpr int kBusyTimeoutMs = 1000;
 
+std::string reason(int error_number) {
+  std::string text = std::strerror(error_number);
+  if (!text.empty()) text[0] = static_cast<char>(std::tolower(static_cast<unsigned char>(text[0])));
+  return text;
+}
+
+// Why `path` cannot be the database, in the user's terms, or "" when nothing is visibly wrong. SQLite says "unable
+// to open database file" for all of these, and opens a file it may not write read-only without a word, so that the
+// first write fails far from the cause.
+std::string unusable_because(const std::filesystem::path& path, bool read_only) {
+  namespace fs = std::filesystem;
+  const std::string& name = path.native();
+  if (name.empty() || name == ":memory:" || name.starts_with("file:")) return "";  // not a plain file name
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return "is a directory, not a database file";
+  const fs::path directory = path.has_parent_path() ? path.parent_path() : fs::path(".");
+  if (!fs::exists(path, ec)) {
+    if (!fs::is_directory(directory, ec)) {
+      return "its directory " + directory.string() +
+             (fs::exists(directory, ec) ? " is not a directory" : " does not exist");
+    }
+    if (read_only) return "no such file";
+    if (::access(directory.c_str(), W_OK | X_OK) != 0) {
+      return "cannot be created in " + directory.string() + " (" + reason(errno) + ")";
+    }
+    return "";
+  }
+  if (::access(name.c_str(), R_OK) != 0) return "not readable (" + reason(errno) + ")";
+  if (read_only) return "";
+  if (::access(name.c_str(), W_OK) != 0) return "not writable (" + reason(errno) + ")";
+  // The write-ahead log and its index are files beside the database.
+  if (::access(directory.c_str(), W_OK | X_OK) != 0) {
+    return "its directory " + directory.string() + " is not writable (" + reason(errno) +
+           "), and the write-ahead log is kept there";
+  }
+  return "";
+}
+
 }  // namespace
 
 Database::Database(const std::filesystem::path& path, bool read_only) : name_(path.string()) {
+  if (const std::string why = unusable_because(path, read_only); !why.empty()) {
+    throw StoreError(name_ + ": " + why, SQLITE_CANTOPEN);
+  }
   // NOMUTEX: a Store is used by one thread at a time, so SQLite's per-call locking would be pure overhead.
   const int flags =
       (read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE) | SQLITE_OPEN_NOMUTEX;

@@ -17,7 +17,9 @@ namespace imubridge::store {
 
 class Database {
  public:
-  // Opens `path` read-write, creating it if missing, or read-only: then SQLite itself refuses every write.
+  // Opens `path` read-write, creating it if missing, or read-only: then SQLite itself refuses every write. A path
+  // that cannot be the database is refused with the reason: a directory, a missing directory, a file this process
+  // may not read (or, read-write, write), or a directory where the file or its write-ahead log cannot be created.
   Database(const std::filesystem::path& path, bool read_only);
   Database(Database&& other) noexcept;
   Database& operator=(Database&&) = delete;

@@ -1,8 +1,7 @@
 #include "store/wal_checkpointer.hpp"
 
-#include <cstdio>
-
 #include "store/error.hpp"
+#include "store/report.hpp"
 
 namespace imubridge::store {
 
@@ -38,14 +37,18 @@ void WalCheckpointer::run() {
   std::unique_lock lock(mutex_);
   while (!wake_.wait_for(lock, interval_, [this] { return stopping_; })) {
     lock.unlock();
-    const int rc = sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
-    const std::string error = rc == SQLITE_OK || rc == SQLITE_BUSY ? "" : sqlite3_errmsg(db_);
-    // Said once per new failure, not every second: the recorder's own writes report a full disk as it happens.
-    if (!error.empty() && error != last_error_)
-      std::fprintf(stderr, "imubridge store: %s: background checkpoint failed: %s\n", name_.c_str(), error.c_str());
-    last_error_ = error;
+    checkpoint();
     lock.lock();
   }
+}
+
+void WalCheckpointer::checkpoint() {
+  const std::lock_guard lock(checkpoint_mutex_);
+  const int rc = sqlite3_wal_checkpoint_v2(db_, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
+  const std::string error = rc == SQLITE_OK || rc == SQLITE_BUSY ? "" : sqlite3_errmsg(db_);
+  // Said once per new failure, not every second: the recorder's own writes report a full disk as it happens.
+  if (!error.empty() && error != last_error_) report(name_ + ": background checkpoint failed: " + error);
+  last_error_ = error;
 }
 
 }  // namespace imubridge::store

@@ -23,6 +23,10 @@ class WalCheckpointer {
   WalCheckpointer(const WalCheckpointer&) = delete;
   WalCheckpointer& operator=(const WalCheckpointer&) = delete;
 
+  // One checkpoint now, as the thread runs them. A failure (disk full) is reported through store::report() (the
+  // daemon's log) once until it changes: it leaves the log growing but every committed row safe in it.
+  void checkpoint();
+
  private:
   void run();
 
@@ -32,10 +36,9 @@ class WalCheckpointer {
   std::mutex mutex_;
   std::condition_variable wake_;
   bool stopping_ = false;
-  // The last checkpoint's error ("" when it succeeded), so a lasting failure is said once. A failure (disk full)
-  // leaves the log growing but every committed row safe in it. Only the thread touches it.
-  std::string last_error_;
-  std::thread thread_;  // last: starts once everything above is ready
+  std::mutex checkpoint_mutex_;  // the thread's checkpoints and checkpoint() calls take turns
+  std::string last_error_;       // the last checkpoint's ("" when it succeeded), so a lasting failure is said once
+  std::thread thread_;           // last: starts once everything above is ready
 };
 
 }  // namespace imubridge::store
