@@ -3,6 +3,7 @@
 #include <toml++/toml.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <charconv>
 #include <cmath>
@@ -291,7 +292,16 @@ LinkConfig read_link(Table& t) {
       t.fail("protocol", e.what());
     }
   }
-  if (auto baud = t.integer("baud", 1, 100'000'000)) link.baud = static_cast<std::uint32_t>(*baud);
+  if (const toml::node* baud = t.find("baud")) {
+    const auto* rate = baud->as_integer();
+    if (!rate) t.fail("baud", "must be a whole number of bits per second, e.g. 115200");
+    try {
+      check_baud(rate->get());
+    } catch (const std::invalid_argument& e) {
+      t.fail("baud", e.what());
+    }
+    link.baud = static_cast<std::uint32_t>(rate->get());
+  }
   link.calibration = read_calibration(t);
   if (auto axes = t.string("axes")) {
     try {
@@ -347,6 +357,15 @@ OutputsConfig read_outputs(Table& t) {
   return outputs;
 }
 
+bool is_wire_format(std::string_view text) {
+  try {
+    protocol::parse_wire_format(text);
+    return true;
+  } catch (const std::invalid_argument&) {
+    return false;
+  }
+}
+
 std::string source_prefix(std::string_view source) {
   return source.empty() ? std::string() : std::string(source) + ": ";
 }
@@ -391,6 +410,10 @@ Config parse_config(std::string_view toml_text, std::string_view source) {
 }
 
 Config load_config(const std::filesystem::path& path) {
+  // A directory opens as a stream that reads nothing, which would look like a file without links.
+  if (std::error_code ec; std::filesystem::is_directory(path, ec)) {
+    throw std::invalid_argument(path.string() + ": is a directory, not a configuration file");
+  }
   std::ifstream in(path, std::ios::binary);
   std::stringstream text;
   text << in.rdbuf();
@@ -417,6 +440,11 @@ void validate_links(const Config& config, std::string_view source) {
     });
     if (!plain) throw std::invalid_argument(which + ": 'name' must be letters, digits, '_', '-' or '.'");
     if (!names.insert(link.name).second) throw std::invalid_argument(which + ": the name is used twice");
+    try {
+      check_baud(link.baud);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(which + ": " + e.what());
+    }
     if (link.reconnect_min > link.reconnect_max) {
       throw std::invalid_argument(which + ": reconnect_min_ms is above reconnect_max_ms");
     }
@@ -482,6 +510,19 @@ std::string to_toml(const Config& config) {
   return out.str();
 }
 
+void check_baud(std::int64_t baud) {
+  // Boost.Asio's serial_port_base::baud_rate maps exactly these to termios B* constants on Linux.
+  static constexpr std::array<std::int64_t, 28> kRates{50,     75,      110,     134,     150,     200,     300,
+                                                       600,    1200,    1800,    2400,    4800,    9600,    19200,
+                                                       38400,  57600,   115200,  230400,  460800,  500000,  576000,
+                                                       921600, 1000000, 1152000, 2000000, 3000000, 3500000, 4000000};
+  if (std::find(kRates.begin(), kRates.end(), baud) != kRates.end()) return;
+  std::string rates;
+  for (const std::int64_t rate : kRates) rates += (rates.empty() ? "" : ", ") + std::to_string(rate);
+  throw std::invalid_argument("baud rate " + std::to_string(baud) + " is not one a serial port can be set to (" +
+                              rates + ")");
+}
+
 LinkSpec parse_link_spec(std::string_view spec) {
   const auto fail = [spec](const std::string& what) {
     return std::invalid_argument("--link '" + std::string(spec) + "': " + what +
@@ -498,12 +539,23 @@ LinkSpec parse_link_spec(std::string_view spec) {
     if (colon == std::string_view::npos) break;
     rest = rest.substr(colon + 1);
   }
-  if (fields.size() >= 3 && !fields.back().empty() &&
-      std::all_of(fields.back().begin(), fields.back().end(), [](char c) { return c >= '0' && c <= '9'; })) {
-    std::uint32_t baud = 0;
-    const auto [end, ec] = std::from_chars(fields.back().data(), fields.back().data() + fields.back().size(), baud);
-    if (ec != std::errc() || baud == 0) throw fail("bad baud rate");
-    link.baud = baud;
+  // The last field is BAUD when it is not a protocol but the one before is, or when it is all digits: so "-5" or
+  // "1e8" after a protocol is a bad baud rate, not an unknown protocol.
+  const std::string_view last = fields.back();
+  const bool all_digits =
+      !last.empty() && std::all_of(last.begin(), last.end(), [](char c) { return c >= '0' && c <= '9'; });
+  if (fields.size() >= 3 && !is_wire_format(last) && (all_digits || is_wire_format(fields[fields.size() - 2]))) {
+    std::int64_t baud = 0;
+    const auto [end, ec] = std::from_chars(last.data(), last.data() + last.size(), baud);
+    if (last.empty() || ec != std::errc() || end != last.data() + last.size()) {
+      throw fail("baud rate '" + std::string(last) + "' is not a whole number");
+    }
+    try {
+      check_baud(baud);
+    } catch (const std::invalid_argument& e) {
+      throw fail(e.what());
+    }
+    link.baud = static_cast<std::uint32_t>(baud);
     fields.pop_back();
   }
   if (fields.size() < 2) throw fail("no PROTOCOL");

@@ -25,6 +25,11 @@ Config load_config(const std::filesystem::path& path);
 // The configuration as TOML that parse_config() reads back to the same Config: the session's config snapshot.
 std::string to_toml(const Config& config);
 
+// The line speeds a serial link can be set to: the termios B* rates Boost.Asio's serial_port knows on Linux, from 50
+// to 4000000. Any other rate would pass here and then fail at every reconnect, so it is refused with the
+// configuration. Throws std::invalid_argument naming the rate and the valid ones.
+void check_baud(std::int64_t baud);
+
 // A link given on the command line: "NAME=DEVICE:PROTOCOL[:BAUD]". DEVICE is a path, or "usb:VID:PID[:SERIAL]" with
 // VID and PID in hex.
 struct LinkSpec {

@@ -126,7 +126,9 @@ void SerialLink::try_open() {
 void SerialLink::open(const std::string& path) {
   port_.open(path);
   try {
-    port_.set_option(asio::serial_port::baud_rate(config_.baud));
+    boost::system::error_code baud_error;
+    port_.set_option(asio::serial_port::baud_rate(config_.baud), baud_error);
+    if (baud_error) throw std::runtime_error(std::to_string(config_.baud) + " baud: " + baud_error.message());
     port_.set_option(asio::serial_port::character_size(8));
     port_.set_option(asio::serial_port::parity(asio::serial_port::parity::none));
     port_.set_option(asio::serial_port::stop_bits(asio::serial_port::stop_bits::one));

@@ -521,6 +521,45 @@ TEST(RunCli, ConfigurationMistakesGiveOneLineAndExitCode2) {
   EXPECT_EQ(count_lines(r.err), 1) << r.err;
 }
 
+// A baud rate no serial port takes is a configuration mistake, found before the daemon starts retrying the port.
+TEST(RunCli, ABadBaudRateIsRefusedAtStartNamingIt) {
+  TempDir dir;
+  const std::string db = " --db " + (dir / "x.db").string();
+  for (const char* rate : {"12345", "100000000", "-5", "0"}) {
+    const auto r = run_imubridge(std::string("run --link imu=/dev/ttyUSB0:imubridge:") + rate + db);
+    EXPECT_EQ(r.exit_code, 2) << rate;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(std::string("baud rate ") + rate + " is not one a serial port can be set to"),
+              std::string::npos)
+        << r.err;
+  }
+  std::ofstream(dir / "imubridge.toml") << "[[link]]\nname = \"imu\"\ndevice = \"/dev/ttyUSB0\"\nbaud = 1\n";
+  const auto r = run_imubridge("run --config " + (dir / "imubridge.toml").string() + db);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find(":4: 'link[0].baud' baud rate 1 is not one"), std::string::npos) << r.err;
+}
+
+TEST(RunCli, ADirectoryGivenForAFileIsCalledOne) {
+  TempDir dir;
+  auto r = run_imubridge("run --config " + dir.path().string());
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.err, "imubridge run: error: " + dir.path().string() + ": is a directory, not a configuration file\n");
+
+  r = run_imubridge("run --link imu=/dev/null:imubridge --db " + dir.path().string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find(dir.path().string() + ": is a directory, not a database file"), std::string::npos) << r.err;
+
+  r = run_imubridge("run --link imu=/dev/null:imubridge --db " + (dir / "missing/x.db").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(
+      r.err.find((dir / "missing/x.db").string() + ": its directory " + (dir / "missing").string() + " does not exist"),
+      std::string::npos)
+      << r.err;
+}
+
 TEST(RunCli, AFileThatIsNotADatabaseIsRefusedAtStart) {
   TempDir dir;
   std::ofstream(dir / "notes.db") << "shopping list\n";

@@ -2,6 +2,7 @@
 // and the snapshot a session keeps.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -124,7 +125,7 @@ TEST(ConfigFile, UnknownKeysAreNamedWithTheirLineAndLikelyMeaning) {
 
 TEST(ConfigFile, BadValuesAreNamedWithTheirLine) {
   EXPECT_EQ(error_of(kLink + "baud = \"fast\"\n"),
-            "test.toml:4: 'link[0].baud' must be an integer from 1 to 100000000");
+            "test.toml:4: 'link[0].baud' must be a whole number of bits per second, e.g. 115200");
   EXPECT_EQ(error_of("[store]\non_full = \"panic\"\n"), "test.toml:2: 'store.on_full' must be one of 'rotate', 'stop'");
   EXPECT_EQ(error_of("[store]\nmax_size_mib = 0.5\n"),
             "test.toml:2: 'store.max_size_mib' must be 0 (no cap) or at least 1");
@@ -135,6 +136,45 @@ TEST(ConfigFile, BadValuesAreNamedWithTheirLine) {
             std::string::npos);
   EXPECT_NE(error_of("link = 3\n").find("'link' must be an array of tables"), std::string::npos);
   EXPECT_NE(error_of("[store\n").find("test.toml:1: "), std::string::npos);
+}
+
+// A rate the serial port cannot be set to would pass here and then fail at every reconnect: it is refused now.
+TEST(ConfigFile, OnlyBaudRatesASerialPortTakesAreAccepted) {
+  for (const char* rate : {"50", "9600", "115200", "921600", "1000000", "4000000"}) {
+    EXPECT_EQ(error_of(kLink + "baud = " + rate + "\n"), "") << rate;
+  }
+  for (const char* rate : {"1", "12345", "100000000", "0", "-9600", "4000001"}) {
+    const std::string error = error_of(kLink + "baud = " + rate + "\n");
+    EXPECT_EQ(error.rfind("test.toml:4: 'link[0].baud' baud rate " + std::string(rate) +
+                              " is not one a serial port can be set to (50, 75, ",
+                          0),
+              0u)
+        << error;
+    EXPECT_NE(error.find(", 115200, "), std::string::npos) << error;
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+  }
+  EXPECT_EQ(error_of(kLink + "baud = 1e8\n"),
+            "test.toml:4: 'link[0].baud' must be a whole number of bits per second, e.g. 115200");
+  // A configuration assembled otherwise (the command line, a program) is checked as well.
+  Config c;
+  c.links.emplace_back().name = "imu";
+  c.links[0].baud = 12345;
+  try {
+    validate(c, "");
+    ADD_FAILURE() << "12345 baud accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("link[0] ('imu'): baud rate 12345 is not one"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ConfigFile, ADirectoryIsNotAConfigurationFile) {
+  const auto dir = std::filesystem::temp_directory_path();
+  try {
+    load_config(dir);
+    ADD_FAILURE() << "a directory was read as a configuration";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), dir.string() + ": is a directory, not a configuration file");
+  }
 }
 
 TEST(ConfigFile, LinksMustBeUnambiguous) {
@@ -221,6 +261,36 @@ TEST(LinkSpec, PathsUsbIdentitiesProtocolsAndBaudRates) {
                           "imu=usb:0403:imubridge", "imu=usb:xyz:6015:imubridge", "imu=/dev/x:imubridge:0"}) {
     EXPECT_THROW(parse_link_spec(bad), std::invalid_argument) << bad;
   }
+}
+
+// After a protocol, the last field is the baud rate, whatever it looks like: "-5" is a bad baud, not a protocol.
+TEST(LinkSpec, ABadBaudRateIsCalledOne) {
+  const auto error_of_spec = [](const std::string& spec) {
+    try {
+      parse_link_spec(spec);
+      return std::string();
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+  };
+  for (const char* rate : {"-5", "0", "12345", "100000000"}) {
+    const std::string error = error_of_spec(std::string("imu=/dev/ttyUSB0:imubridge:") + rate);
+    EXPECT_EQ(error.rfind("--link 'imu=/dev/ttyUSB0:imubridge:" + std::string(rate) + "': baud rate " + rate +
+                              " is not one a serial port can be set to (",
+                          0),
+              0u)
+        << error;
+  }
+  for (const char* rate : {"1e8", "fast", "+9600", "9600.0"}) {
+    const std::string error = error_of_spec(std::string("imu=/dev/ttyUSB0:xbee:") + rate);
+    EXPECT_EQ(error.rfind("--link 'imu=/dev/ttyUSB0:xbee:" + std::string(rate) + "': baud rate '" + rate +
+                              "' is not a whole number",
+                          0),
+              0u)
+        << error;
+  }
+  EXPECT_EQ(parse_link_spec("imu=/dev/ttyUSB0:imubridge:9600").baud, 9600u);
+  EXPECT_NE(error_of_spec("imu=/dev/ttyUSB0:ubx").find("ubx"), std::string::npos) << "still an unknown protocol";
 }
 
 TEST(LinkSpec, TheCommandLineOverridesTheFilesLinkOfTheSameName) {
