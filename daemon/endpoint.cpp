@@ -1,12 +1,14 @@
 #include "daemon/endpoint.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 
 #include <algorithm>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/local/stream_protocol.hpp>
 #include <boost/asio/write.hpp>
+#include <cerrno>
 #include <charconv>
 #include <chrono>
 #include <cstring>
@@ -37,11 +39,15 @@ GenericEndpoint stream_address(const Endpoint& endpoint) {
   return asio::ip::tcp::endpoint(asio::ip::make_address(endpoint.host), endpoint.port);
 }
 
-void open_listener(Acceptor& acceptor, const GenericEndpoint& address, error_code& ec) {
+void open_listener(Acceptor& acceptor, const Endpoint& endpoint, const GenericEndpoint& address, error_code& ec) {
   acceptor.close(ec);
   acceptor.open(address.protocol(), ec);
   if (!ec && address.protocol().family() != AF_UNIX) acceptor.set_option(asio::socket_base::reuse_address(true), ec);
   if (!ec) acceptor.bind(address, ec);
+  // Before listen(), so that nobody connects while the umask's mode (0755 under the usual 022) still holds.
+  if (!ec && endpoint.kind == Endpoint::Kind::unix_listen && ::chmod(endpoint.path.c_str(), kUnixSocketMode) != 0) {
+    ec.assign(errno, boost::system::system_category());
+  }
   if (!ec) acceptor.listen(asio::socket_base::max_listen_connections, ec);
 }
 
@@ -219,7 +225,7 @@ StreamServer::StreamServer(asio::io_context& io, const Endpoint& endpoint, std::
   }
   const GenericEndpoint address = stream_address(endpoint);
   error_code ec;
-  open_listener(acceptor_, address, ec);
+  open_listener(acceptor_, endpoint, address, ec);
   if (ec == asio::error::address_in_use && endpoint.kind == Endpoint::Kind::unix_listen) {
     if (!std::filesystem::is_socket(endpoint.path)) {
       throw std::runtime_error(endpoint.text + ": " + endpoint.path.string() + " exists and is not a socket");
@@ -228,7 +234,7 @@ StreamServer::StreamServer(asio::io_context& io, const Endpoint& endpoint, std::
       throw std::runtime_error(endpoint.text + ": another process is listening on " + endpoint.path.string());
     }
     std::filesystem::remove(endpoint.path);
-    open_listener(acceptor_, address, ec);
+    open_listener(acceptor_, endpoint, address, ec);
   }
   if (ec) throw std::runtime_error(endpoint.text + ": cannot listen: " + ec.message());
   if (endpoint.kind == Endpoint::Kind::tcp_listen) {

@@ -3,14 +3,14 @@
 // that the outputs (daemon/outputs.hpp) and the link bridges (daemon/bridge.hpp) share. Everything here runs on one
 // io_context thread. Objects with handlers in flight are owned by shared_ptr and their handlers hold a reference, so
 // they live until their owner close()s them; once closed they do nothing more.
-#include <utility>  // before Boost.Asio
+#include <sys/types.h>
 
+#include <array>
 #include <boost/asio/basic_socket_acceptor.hpp>
 #include <boost/asio/generic/stream_protocol.hpp>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/udp.hpp>
 #include <boost/asio/steady_timer.hpp>
-#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -18,6 +18,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>  // before Boost.Asio
 #include <vector>
 
 #include "daemon/config.hpp"
@@ -75,9 +76,14 @@ class StreamPeer : public std::enable_shared_from_this<StreamPeer> {
   Counters counters_;
 };
 
+// Who may connect to a unix socket we listen on: the daemon's user and group (connecting needs write permission),
+// whatever the umask. Under systemd the socket's directory (RuntimeDirectory) restricts it further.
+inline constexpr mode_t kUnixSocketMode = 0660;
+
 // Accepts clients on a tcp-listen or unix endpoint and sends each message to all of them (each through its own
 // StreamPeer queue). A unix socket file left behind by a process that died is replaced; a socket some process still
-// listens on, or any other file at the path, is an error. close() removes the socket file again.
+// listens on, or any other file at the path, is an error. A unix socket file is created with kUnixSocketMode, and
+// close() removes it again.
 class StreamServer : public std::enable_shared_from_this<StreamServer> {
  public:
   // Throws std::runtime_error naming the endpoint when it cannot listen (address in use, no permission, ...).

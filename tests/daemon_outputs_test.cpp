@@ -2,9 +2,8 @@
 // TCP and unix sockets, slow subscribers, decimation and reconfiguration.
 #include <gtest/gtest.h>
 #include <poll.h>
+#include <sys/stat.h>
 #include <unistd.h>
-
-#include <utility>  // before Boost.Asio
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/local/stream_protocol.hpp>
@@ -13,8 +12,10 @@
 #include <chrono>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
+#include <utility>  // before Boost.Asio
 
 #include "daemon/outputs.hpp"
 #include "tests/temp_dir.hpp"
@@ -162,10 +163,30 @@ TEST(Outputs, NumbersReadBackExactlyAndAnyLinkNameMakesValidJson) {
   EXPECT_EQ(body.at("seq").get<std::uint64_t>(), s.seq);
   for (std::size_t i = 0; i < 3; ++i) {
     const char* axis[] = {"x", "y", "z"};
-    EXPECT_EQ(std::bit_cast<std::uint64_t>(body["accel"][axis[i]].get<double>()), std::bit_cast<std::uint64_t>(accel[i]))
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(body["accel"][axis[i]].get<double>()),
+              std::bit_cast<std::uint64_t>(accel[i]))
         << "accel." << axis[i];
     EXPECT_EQ(std::bit_cast<std::uint64_t>(body["gyro"][axis[i]].get<double>()), std::bit_cast<std::uint64_t>(gyro[i]))
         << "gyro." << axis[i];
+  }
+}
+
+// Connecting to a unix socket takes write permission: 0660 lets the daemon's user and group in, and nobody else,
+// whatever umask the daemon was started with.
+TEST(Outputs, AUnixSocketIsForTheDaemonsUserAndGroupWhateverTheUmask) {
+  TempDir dir;
+  for (const mode_t umask : {mode_t{0}, mode_t{022}, mode_t{077}}) {
+    asio::io_context io;
+    const auto socket_path = dir.path() / "lines.sock";
+    const mode_t previous = ::umask(umask);
+    auto outputs = std::make_unique<Outputs>(io, outputs_config({}, {"unix://" + socket_path.string()}));
+    ::umask(previous);
+    EXPECT_EQ(std::filesystem::status(socket_path).permissions(),
+              std::filesystem::perms::owner_read | std::filesystem::perms::owner_write |
+                  std::filesystem::perms::group_read | std::filesystem::perms::group_write)
+        << "umask " << std::oct << umask;
+    outputs.reset();
+    EXPECT_FALSE(std::filesystem::exists(socket_path));
   }
 }
 
