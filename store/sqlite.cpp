@@ -37,7 +37,7 @@ std::string unusable_because(const std::filesystem::path& path, bool read_only) 
       return "its directory " + directory.string() +
              (fs::exists(directory, ec) ? " is not a directory" : " does not exist");
     }
-    if (read_only) return "no such file";
+    if (read_only) return "";  // SQLite's "unable to open database file" says it
     if (::access(directory.c_str(), W_OK | X_OK) != 0) {
       return "cannot be created in " + directory.string() + " (" + reason(errno) + ")";
     }
