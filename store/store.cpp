@@ -4,10 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <string>
 
+#include "store/report.hpp"
 #include "store/schema.hpp"
 
 namespace imubridge::store {
@@ -198,7 +198,7 @@ Store::~Store() {
   try {
     commit();
   } catch (const StoreError& e) {
-    std::fprintf(stderr, "imubridge store: %s\n", e.what());
+    report(e.what());
   }
 }
 

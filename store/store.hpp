@@ -74,7 +74,7 @@ class Store {
   explicit Store(const std::filesystem::path& path, Options options = {});
   Store(const Store&) = delete;
   Store& operator=(const Store&) = delete;
-  // Commits what is pending. A failure here can only be reported on stderr: call commit() first to handle it.
+  // Commits what is pending. A failure here can only be reported (report.hpp): call commit() first to handle it.
   ~Store();
 
   // Writing. Rows join the open batch; sessions, links and runs are committed at once since others refer to them.

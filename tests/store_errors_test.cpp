@@ -101,5 +101,31 @@ TEST(StoreErrors, AFailedBackgroundCheckpointIsReportedThroughTheSink) {
   EXPECT_EQ(lines[0].find('\n'), std::string::npos) << lines[0];
 }
 
+// A destructor cannot throw: the commit it makes reports its failure through the same sink.
+TEST(StoreErrors, ACommitFailingInTheDestructorIsReportedThroughTheSink) {
+  TempDir dir;
+  const fs::path path = dir / "x.db";
+  std::vector<std::string> lines;
+  set_report_sink([&](std::string_view line) { lines.emplace_back(line); });
+  rlimit unlimited{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &unlimited), 0);
+  const auto previous_handler = ::signal(SIGXFSZ, SIG_IGN);
+  {
+    Store store(path);
+    const std::int64_t session = store.begin_session({.kind = "live"});
+    const std::int64_t link = store.add_link(session, "imu0", "imubridge", "");
+    const std::vector<std::uint8_t> bytes(4096, 0x5a);
+    for (int i = 0; i < 64; ++i) store.append_chunk(session, link, Direction::rx, i, i, bytes);
+    const rlimit at_current_size{static_cast<rlim_t>(fs::file_size(dir / "x.db-wal")), unlimited.rlim_max};
+    ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &at_current_size), 0);
+  }
+  ::setrlimit(RLIMIT_FSIZE, &unlimited);
+  ::signal(SIGXFSZ, previous_handler);
+  set_report_sink({});
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0].rfind(path.string() + ": ", 0), 0u) << lines[0];
+  EXPECT_NE(lines[0].find("rolled back the 64 rows"), std::string::npos) << lines[0];
+}
+
 }  // namespace
 }  // namespace imubridge::store
