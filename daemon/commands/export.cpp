@@ -26,15 +26,16 @@ int run_export(const ExportCommandOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const auto table = replay::parse_export_table(o.what);
   const auto format = replay::parse_export_format(o.format);
-  std::fprintf(stderr, "%s\n", replay::describe_state(replay::find_session(store, o.session)).c_str());
   if (o.out.empty()) {
     std::ios::sync_with_stdio(false);
     replay::export_table(store, o.session, table, o.run, format, std::cout);
-    return 0;
+  } else {
+    std::ofstream out(o.out, std::ios::binary | std::ios::trunc);
+    if (!out) throw std::runtime_error("cannot write " + o.out);
+    replay::export_table(store, o.session, table, o.run, format, out);
   }
-  std::ofstream out(o.out, std::ios::binary | std::ios::trunc);
-  if (!out) throw std::runtime_error("cannot write " + o.out);
-  replay::export_table(store, o.session, table, o.run, format, out);
+  // Once it worked: a mistake is one line.
+  std::fprintf(stderr, "%s\n", replay::describe_state(replay::find_session(store, o.session)).c_str());
   return 0;
 }
 

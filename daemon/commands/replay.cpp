@@ -133,7 +133,6 @@ void print_losses(const replay::ReplayResult& r) {
 int replay_into_run(const ReplayCommandOptions& o) {
   store::Store store(o.db);
   const store::Session session = replay::find_session(store, o.session);
-  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());
   replay::ReplayOptions options;
   if (!o.params.empty()) options.params = replay::parse_params(read_file(o.params), o.params);
   options.play = {.from_s = o.from_s, .to_s = o.to_s, .speed = parse_speed(o.speed.empty() ? "max" : o.speed)};
@@ -145,6 +144,7 @@ int replay_into_run(const ReplayCommandOptions& o) {
   const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
   const double recorded_s = r.last_s - r.first_s;
   progress.clear();
+  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());  // once it worked: a mistake is one line
   std::fprintf(stderr,
                "replayed session %lld into run %lld: %llu samples, %llu estimates from %llu chunks; %.1f s recorded "
                "in %.2f s (%.0fx real time)\n",
@@ -159,12 +159,12 @@ int replay_into_run(const ReplayCommandOptions& o) {
 int replay_to_pty(const ReplayCommandOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const store::Session session = replay::find_session(store, o.session);
-  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());
   const replay::PlayOptions play{.from_s = o.from_s,
                                  .to_s = o.to_s,
                                  .speed = parse_speed(o.speed.empty() ? "1" : o.speed),
                                  .link = link_id(store, session, o.link)};
   PtyPair pty(o.to_pty);
+  std::fprintf(stderr, "%s\n", replay::describe_state(session).c_str());
   std::fprintf(stderr, "replaying session %lld's bytes on %s (%s); Ctrl-C stops\n", static_cast<long long>(o.session),
                o.to_pty.c_str(), pty.slave_name().c_str());
   std::signal(SIGINT, on_replay_stop_signal);
