@@ -21,7 +21,6 @@ class DeviceWatch {
   DeviceWatch(const DeviceWatch&) = delete;
   DeviceWatch& operator=(const DeviceWatch&) = delete;
 
-  bool active() const { return stream_.is_open(); }
   void stop();
 
  private:

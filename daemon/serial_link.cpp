@@ -148,11 +148,10 @@ void SerialLink::open(const std::string& path) {
     }
   }
   tune(port_.native_handle());
-  opened_node_ = Identity{node.st_dev, node.st_ino, node.st_ctim, node.st_rdev};
+  opened_node_ = Identity::of(node);
   struct stat link {};
   opened_symlink_.reset();
-  if (::lstat(config_.device.path.c_str(), &link) == 0 && S_ISLNK(link.st_mode))
-    opened_symlink_ = Identity{link.st_dev, link.st_ino, link.st_ctim, 0};
+  if (::lstat(config_.device.path.c_str(), &link) == 0 && S_ISLNK(link.st_mode)) opened_symlink_ = Identity::of(link);
   const bool reopened = ever_opened_;
   ever_opened_ = true;
   path_ = path;
@@ -172,10 +171,9 @@ void SerialLink::refuse_stale_symlink() const {
   if (!opened_symlink_ || !opened_node_) return;  // never open, or not through a symlink
   struct stat link {};
   if (::lstat(config_.device.path.c_str(), &link) != 0 || !S_ISLNK(link.st_mode)) return;  // made anew
-  if (!(Identity{link.st_dev, link.st_ino, link.st_ctim, 0} == *opened_symlink_)) return;  // pointed anew
+  if (!(Identity::of(link) == *opened_symlink_)) return;                                   // pointed anew
   struct stat node {};
-  if (::stat(config_.device.path.c_str(), &node) == 0 &&
-      Identity{node.st_dev, node.st_ino, node.st_ctim, node.st_rdev} == *opened_node_)
+  if (::stat(config_.device.path.c_str(), &node) == 0 && Identity::of(node) == *opened_node_)
     return;  // the very node that was open: the same device, still there
   throw ForeignTerminal(config_.device.path.string() +
                         " still names the tty it named when the device was lost, and that tty was freed since: "

@@ -84,7 +84,8 @@ class SerialLink {
     dev_t dev = 0;
     ino_t ino = 0;
     timespec ctime{};
-    dev_t rdev = 0;
+    dev_t rdev = 0;  // 0 for a symlink
+    static Identity of(const struct stat& s) { return {s.st_dev, s.st_ino, s.st_ctim, s.st_rdev}; }
     bool operator==(const Identity& o) const {
       return dev == o.dev && ino == o.ino && ctime.tv_sec == o.ctime.tv_sec && ctime.tv_nsec == o.ctime.tv_nsec &&
              rdev == o.rdev;

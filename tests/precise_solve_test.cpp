@@ -40,34 +40,36 @@ void add(ceres::Problem& problem, const Linear& l, double* x) {
 
 double cost_at(const Linear& l, const Eigen::VectorXd& x) { return 0.5 * (l.a * x - l.b).squaredNorm(); }
 
-TEST(GaussNewtonDecrease, IsTheCostTheStepSavesOnALinearProblem) {
-  const Linear l = random_linear(40, 3, 5);
-  Eigen::VectorXd x(3);
-  x << 1.0, -2.0, 0.5;
+// 40 random residuals in 3 parameters, started away from their optimum.
+struct LinearProblem {
+  explicit LinearProblem(unsigned seed) : l(random_linear(40, 3, seed)), x(Eigen::Vector3d(1.0, -2.0, 0.5)) {
+    add(problem, l, x.data());
+  }
+  Linear l;
+  Eigen::VectorXd x;
   ceres::Problem problem;
-  add(problem, l, x.data());
-  const Eigen::VectorXd optimum = l.a.colPivHouseholderQr().solve(l.b);
-  const double expected = (cost_at(l, x) - cost_at(l, optimum)) / cost_at(l, x);
-  EXPECT_NEAR(gauss_newton_relative_decrease(problem), expected, 1e-6 * expected);
-  x = optimum;
-  EXPECT_LT(gauss_newton_relative_decrease(problem), 1e-12);
+};
+
+TEST(GaussNewtonDecrease, IsTheCostTheStepSavesOnALinearProblem) {
+  LinearProblem p(5);
+  const Eigen::VectorXd optimum = p.l.a.colPivHouseholderQr().solve(p.l.b);
+  const double expected = (cost_at(p.l, p.x) - cost_at(p.l, optimum)) / cost_at(p.l, p.x);
+  EXPECT_NEAR(gauss_newton_relative_decrease(p.problem), expected, 1e-6 * expected);
+  p.x = optimum;
+  EXPECT_LT(gauss_newton_relative_decrease(p.problem), 1e-12);
 }
 
 TEST(GaussNewtonDecrease, LeavesOutHeldCoordinatesAndThoseOnABound) {
-  const Linear l = random_linear(40, 3, 6);
-  Eigen::VectorXd x(3);
-  x << 1.0, -2.0, 0.5;
-  ceres::Problem problem;
-  add(problem, l, x.data());
-  const double all = gauss_newton_relative_decrease(problem);
+  LinearProblem p(6);
+  const double all = gauss_newton_relative_decrease(p.problem);
   // Only coordinate 0 may move: the promise is that of the 1-D problem in it.
-  problem.SetManifold(x.data(), new ceres::SubsetManifold(3, {1}));
-  problem.SetParameterLowerBound(x.data(), 2, 0.5);  // x[2] sits on it
-  const Eigen::VectorXd column = l.a.col(0);
-  const Eigen::VectorXd rest = l.a * x - l.b;
+  p.problem.SetManifold(p.x.data(), new ceres::SubsetManifold(3, {1}));
+  p.problem.SetParameterLowerBound(p.x.data(), 2, 0.5);  // x[2] sits on it
+  const Eigen::VectorXd column = p.l.a.col(0);
+  const Eigen::VectorXd rest = p.l.a * p.x - p.l.b;
   const double g = column.dot(rest), h = column.squaredNorm();
-  EXPECT_NEAR(gauss_newton_relative_decrease(problem), 0.5 * g * g / h / cost_at(l, x), 1e-6 * all);
-  EXPECT_LT(gauss_newton_relative_decrease(problem), all);
+  EXPECT_NEAR(gauss_newton_relative_decrease(p.problem), 0.5 * g * g / h / cost_at(p.l, p.x), 1e-6 * all);
+  EXPECT_LT(gauss_newton_relative_decrease(p.problem), all);
 }
 
 // Rosenbrock's valley as least squares, plus a residual nothing explains (as noise is): LM crawls along the valley
