@@ -5,11 +5,11 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
-#include "pipeline/link_recorder.hpp"
-#include "pipeline/session_config.hpp"
+#include "pipeline/recorded_session.hpp"
 #include "protocol/imu_frame.hpp"
 #include "replay/position_derivative.hpp"
 
@@ -151,12 +151,11 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                              {"velocity_derived", result.velocity_derived},
                              {"accel_lsb", options.accel_lsb},
                              {"gyro_lsb", options.gyro_lsb}}}};
-  pipeline::add_recorded_links(config, {{"imu0", protocol::WireFormat::imubridge, calibration, options.imu_axes}});
   std::vector<double> axes_t;  // the rows as read, for the gravity check
   std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
   // The session begins with the first usable row, so a file without one leaves nothing behind. The dataset's
   // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row.
-  std::optional<pipeline::LinkRecorder> recorder;
+  std::unique_ptr<pipeline::LinkRecorder> recorder;
   std::int64_t link = 0, t0 = 0, last_t = 0;
   std::vector<std::uint8_t> bytes;
   std::vector<protocol::Sample> samples;
@@ -167,12 +166,17 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
       [&](const TableRow& row) -> std::optional<std::string> {
         if (!recorder) {
           t0 = row.t_ns;
-          result.session = store.begin_session({.kind = "import",
-                                                .source = "EuRoC dataset " + options.dir.string(),
-                                                .config = config.dump(),
-                                                .started_wall_ns = t0});
-          link = store.add_link(result.session, "imu0", "imubridge", "EuRoC imu0, " + result.imu.path.string());
-          recorder.emplace(store, result.session, link, "imu0", protocol::WireFormat::imubridge, calibration);
+          pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+              store,
+              {.kind = "import",
+               .source = "EuRoC dataset " + options.dir.string(),
+               .config = config,
+               .started_wall_ns = t0},
+              {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, options.imu_axes},
+                .device = "EuRoC imu0, " + result.imu.path.string()}});
+          result.session = recorded.id;
+          link = recorded.store_links[0];
+          recorder = std::move(recorded.recorders[0]);
         }
         const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
         const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
@@ -213,8 +217,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                                         .kind = "imu_axes_mismatch",
                                         .detail = *result.axes.mismatch});
   }
-  store.end_session(result.session, last_t);
-  store.commit();
+  pipeline::end_recorded_session(store, result.session, last_t);
   return result;
 }
 

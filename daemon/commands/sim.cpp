@@ -18,8 +18,7 @@
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
 #include "estimator/imu_axes.hpp"
-#include "pipeline/link_recorder.hpp"
-#include "pipeline/session_config.hpp"
+#include "pipeline/recorded_session.hpp"
 #include "protocol/calibration.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
@@ -105,15 +104,17 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   const auto format = protocol::parse_wire_format(o.protocol);
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
-  nlohmann::json description = describe(o, config);
-  pipeline::add_recorded_links(description, {{"sim", format, config.imu.calibration, o.imu_axes}});
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
-  const std::int64_t session = store.begin_session({.kind = "sim",
-                                                    .source = "imubridge sim " + describe(o, config).dump(),
-                                                    .config = description.dump(),
-                                                    .started_wall_ns = start_wall});
-  const std::int64_t link = store.add_link(session, "sim", o.protocol, "simulated IMU, scenario " + o.scenario);
-  pipeline::LinkRecorder recorder(store, session, link, "sim", format, config.imu.calibration);
+  const pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+      store,
+      {.kind = "sim",
+       .source = "imubridge sim " + describe(o, config).dump(),
+       .config = describe(o, config),
+       .started_wall_ns = start_wall},
+      {{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
+        .device = "simulated IMU, scenario " + o.scenario}});
+  const std::int64_t session = recorded.id;
+  pipeline::LinkRecorder& recorder = *recorded.recorders[0];
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
   std::vector<protocol::Sample> samples;
@@ -138,8 +139,7 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   encoder.flush(bytes);
   if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
   recorder.finish(last_ns, start_wall + last_ns, samples);
-  store.end_session(session, wall_now_ns());
-  store.commit();
+  pipeline::end_recorded_session(store, session, wall_now_ns());
   std::fprintf(stderr, "recorded %s flight (%.1f s, seed %llu) into %s as session %lld\n", o.scenario.c_str(),
                config.duration_s, static_cast<unsigned long long>(o.seed), o.db.c_str(),
                static_cast<long long>(session));
