@@ -49,6 +49,24 @@ void set_temperature(Sample& s, std::int16_t cdeg) {
   s.temperature_c = cdeg / 100.0;
 }
 
+// The sender's clock as a typed message carries it: time_usec, or time_boot_ms in microseconds; nothing for untimed
+// or undecoded messages.
+std::optional<std::uint64_t> device_time_us(const Message& m) {
+  const std::optional<Decoded> decoded = decode(m);
+  if (!decoded) return std::nullopt;
+  return std::visit(
+      []<typename M>(const M& message) -> std::optional<std::uint64_t> {
+        if constexpr (requires { message.time_usec; }) {
+          return static_cast<std::uint64_t>(message.time_usec);
+        } else if constexpr (requires { message.time_boot_ms; }) {
+          return std::uint64_t{message.time_boot_ms} * 1000;
+        } else {
+          return std::nullopt;
+        }
+      },
+      *decoded);
+}
+
 Sample sample_of(const HighresImu& m) {
   Sample s;
   s.device_time_us = static_cast<std::int64_t>(m.time_usec);
@@ -149,14 +167,29 @@ inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /
 inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<Message>& out,
                                    DecoderCounters& counters) {
   const Header h = Header::read(f.data());
+  Message& m = out.emplace_back();
+  read_message(f.data(), h, m);
+  const std::optional<std::uint64_t> time = device_time_us(m);
   // Each component numbers its own frames, mod 256.
-  const auto [last, first] = last_seq.try_emplace(static_cast<std::uint16_t>(h.sysid << 8 | h.compid), h.seq);
+  const auto component = static_cast<std::uint16_t>(h.sysid << 8 | h.compid);
+  const auto [last, first] = last_seq.try_emplace(component, h.seq);
+  auto& times = last_time_us[component];
   if (!first) {
-    if (count_sequence_step(last->second, h.seq, counters) == 0) return false;  // sent again
+    const auto previous_time = time ? times.find(h.msgid) : times.end();
+    if (previous_time != times.end() && is_restart(last->second, h.seq, previous_time->second, *time)) {
+      // Its numbers start again: the step to them is no loss.
+      ++counters.device_restarts;
+      ++clock_epoch;
+      times.clear();
+    } else if (count_sequence_step(last->second, h.seq, counters) == 0) {
+      out.pop_back();  // sent again
+      return false;
+    }
     last->second = h.seq;
   }
+  if (time) times[h.msgid] = *time;
   if (!is_decoded(h.msgid)) ++counters.unsupported;
-  read_message(f.data(), h, out.emplace_back());
+  m.clock_epoch = clock_epoch;
   return true;
 }
 
@@ -182,7 +215,10 @@ std::optional<Sample> to_sample(const Message& m, const Calibration* raw_calibra
   if (const auto* highres = std::get_if<HighresImu>(&*decoded)) s = sample_of(*highres);
   if (const auto* scaled = std::get_if<ScaledImu>(&*decoded)) s = sample_of(*scaled);
   if (const auto* raw = std::get_if<RawImu>(&*decoded); raw && raw_calibration) s = sample_of(*raw, *raw_calibration);
-  if (s) s->seq = m.seq;
+  if (s) {
+    s->seq = m.seq;
+    s->clock_epoch = m.clock_epoch;
+  }
   return s;
 }
 

@@ -33,6 +33,8 @@ struct Message {
   std::uint8_t len = 0;                     // payload length as on the wire (a v2 sender may truncate)
   std::array<std::uint8_t, 255> payload{};  // zero-filled beyond len
   bool signed_ = false;                     // v2 signature present (skipped, not verified)
+  // The sender's restarts the decoder saw before this message (Decoder); 0 for a message built here.
+  std::uint32_t clock_epoch = 0;
   friend bool operator==(const Message&, const Message&) = default;
 };
 
@@ -79,6 +81,10 @@ class Decoder {
     bool take(std::span<const std::uint8_t> frame, std::vector<Message>& out, DecoderCounters& counters);
 
     std::unordered_map<std::uint16_t, std::uint8_t> last_seq;  // by sysid << 8 | compid
+    // Each component's last device time per timed message id (time_usec, or time_boot_ms in us): a component whose
+    // next frame is not the next number and whose clock went back restarted (protocol::is_restart).
+    std::unordered_map<std::uint16_t, std::unordered_map<std::uint32_t, std::uint64_t>> last_time_us;
+    std::uint32_t clock_epoch = 0;
   };
 
   StreamScanner<Framing> scanner_;

@@ -750,6 +750,48 @@ TEST(MavlinkDecoder, SequenceGapsPerSenderWithWrap) {
   EXPECT_EQ(r.counters.duplicates, 0u);
 }
 
+// An autopilot that reboots numbers its frames and counts its clock from zero again.
+Bytes timed_frames(std::uint8_t first_seq, std::uint64_t first_time_us, int count) {
+  Bytes stream;
+  for (int k = 0; k < count; ++k) {
+    HighresImu imu = kHighres;
+    imu.time_usec = first_time_us + 1000u * static_cast<std::uint64_t>(k);
+    Attitude attitude = kAttitude;
+    attitude.time_boot_ms = static_cast<std::uint32_t>(imu.time_usec / 1000);
+    append(stream, bytes_of(imu, {.seq = static_cast<std::uint8_t>(first_seq + 2 * k)}));
+    append(stream, bytes_of(attitude, {.seq = static_cast<std::uint8_t>(first_seq + 2 * k + 1)}));
+  }
+  return stream;
+}
+
+TEST(MavlinkDecoder, ARebootedSenderIsARestartNotALoss) {
+  Bytes stream = timed_frames(100, 600'000'000, 20);  // seq 100..139, ten minutes after boot
+  append(stream, timed_frames(0, 1'000, 20));          // seq 0..39 from boot again
+  const Decoding r = decode_stream(stream);
+  ASSERT_EQ(r.frames.size(), 80u);
+  EXPECT_EQ(r.counters.device_restarts, 1u);
+  EXPECT_EQ(r.counters.sequence_gaps, 0u);
+  EXPECT_EQ(r.counters.frames_lost, 0u);
+  EXPECT_EQ(r.frames[39].clock_epoch, 0u);
+  EXPECT_EQ(r.frames[40].clock_epoch, 1u);
+  const std::optional<Sample> after = to_sample(r.frames[40], nullptr);
+  ASSERT_TRUE(after);
+  EXPECT_EQ(after->clock_epoch, 1u);
+  EXPECT_EQ(after->device_time_us, 1'000);
+}
+
+TEST(MavlinkDecoder, AClockThatStepsBackBetweenConsecutiveFramesIsNoRestart) {
+  // The next number with an earlier time is a glitch of the clock (the estimator drops that sample); a restart
+  // needs the numbering to start again as well.
+  Bytes stream = timed_frames(10, 5'000'000, 5);   // seq 10..19
+  append(stream, timed_frames(20, 4'000'000, 5));  // seq 20..29, its clock a second back
+  const Decoding r = decode_stream(stream);
+  EXPECT_EQ(r.frames.size(), 20u);
+  EXPECT_EQ(r.counters.device_restarts, 0u);
+  EXPECT_EQ(r.counters.sequence_gaps, 0u);
+  EXPECT_EQ(r.frames.back().clock_epoch, 0u);
+}
+
 TEST(MavlinkDecoder, RepeatedSequenceNumberFromAComponentIsADuplicate) {
   // A telemetry radio that retransmits delivers a frame twice. Another component may use the same number meanwhile.
   const std::vector<Sent> sent = {
