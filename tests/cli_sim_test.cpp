@@ -33,6 +33,17 @@ TEST(SimCli, ASpeedOutsideItsRangeIsRefusedInOneLine) {
   EXPECT_NE(run_imubridge("sim --help").out.find("from 0.001 to 1000"), std::string::npos);
 }
 
+TEST(SimCli, ARateOutsideItsRangeIsRefusedInOneLine) {
+  TempDir dir;
+  for (const char* rate : {"1e9", "10001", "0.5", "0", "-100", "1e-300"}) {
+    const auto r = run_imubridge(std::string("sim --rate ") + rate + " --file " + (dir / "f.bin").string());
+    EXPECT_EQ(r.exit_code, 2) << rate;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find("must be from 1 to 10000 Hz"), std::string::npos) << r.err;
+  }
+  EXPECT_EQ(run_imubridge("sim --rate 10000 --duration 0.01 --file " + (dir / "f.bin").string()).exit_code, 0);
+}
+
 // The simulator streams its flight (its plan drawn as it goes); the bytes are those it wrote when it planned the
 // whole flight first.
 TEST(SimCli, TheSameSeedGivesTheSameBytesAsBefore) {

@@ -45,6 +45,8 @@ struct SimOptions {
 // --pty's pace. Beyond these it stops meaning anything: at 0.001 a 200 Hz IMU already sends one sample every 5 s,
 // and at 1000 the longest flight streams in 90 s.
 constexpr double kMinSpeed = 0.001, kMaxSpeed = 1000.0;
+// IMU rates a ground station meets span 100 to 1000 Hz; beyond 10 kHz a day's flight would be a billion samples.
+constexpr double kMinRateHz = 1.0, kMaxRateHz = 10000.0;
 
 std::string format_number(double value) {
   std::ostringstream text;
@@ -261,7 +263,9 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   cmd->add_option(
       "--duration", o->duration_s,
       "Flight length in seconds, at most " + format_number(sim::kMaxDurationS) + " (24 h) (default: the scenario's)");
-  cmd->add_option("--rate", o->rate_hz, "IMU sample rate in Hz (default: the scenario's)");
+  cmd->add_option("--rate", o->rate_hz,
+                  "IMU sample rate in Hz, from " + format_number(kMinRateHz) + " to " + format_number(kMaxRateHz) +
+                      " (default: the scenario's)");
   cmd->add_option("--effect", o->effects, "Extra effect NAME=VALUE, repeatable (docs/simulator.md lists them)");
   cmd->add_option("--protocol", o->protocol, "Wire format for --db, --pty and --file")
       ->check(CLI::IsMember({"imubridge", "xbee", "xbee-escaped", "mavlink"}))
@@ -289,6 +293,10 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   out->add_option("--file", o->file, "Write the wire bytes to this file");
   out->require_option(1);
   return [o] {
+    if (o->rate_hz && !(*o->rate_hz >= kMinRateHz && *o->rate_hz <= kMaxRateHz)) {
+      throw std::invalid_argument("--rate " + format_number(*o->rate_hz) + ": must be from " +
+                                  format_number(kMinRateHz) + " to " + format_number(kMaxRateHz) + " Hz");
+    }
     if (!(o->speed >= kMinSpeed && o->speed <= kMaxSpeed)) {
       throw std::invalid_argument("--speed " + format_number(o->speed) + ": must be from " + format_number(kMinSpeed) +
                                   " to " + format_number(kMaxSpeed) + " times real time");
