@@ -12,6 +12,8 @@ namespace {
 constexpr std::uint64_t kPlanStream = 1;
 // The altitude plan has its own (the sensor noise is stream 2): switching it on leaves roll and pitch as they were.
 constexpr std::uint64_t kVerticalPlanStream = 3;
+// And the heading turns theirs: a flight with turns keeps the roll, pitch and altitude plan it has without them.
+constexpr std::uint64_t kHeadingPlanStream = 4;
 
 }  // namespace
 
@@ -19,7 +21,7 @@ Flight::Flight(const FlightConfig& config, double duration_s, std::uint64_t seed
     : vehicle_(config.vehicle, config.air),
       controller_(vehicle_, config.gains, Eigen::Vector3d(0.0, 0.0, -config.start_altitude_m)),
       plan_(config.manoeuvres, config.vertical, duration_s, Rng::stream(seed, kPlanStream),
-            Rng::stream(seed, kVerticalPlanStream)),
+            Rng::stream(seed, kVerticalPlanStream), config.turns, Rng::stream(seed, kHeadingPlanStream)),
       dt_(1.0 / config.physics_rate_hz) {
   const RigidState start = vehicle_.hover_at({0.0, 0.0, -config.start_altitude_m});
   nodes_.push_back({start, controller_.rotor_command(start, plan_.at(0.0))});

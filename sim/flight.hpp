@@ -18,6 +18,7 @@ struct FlightConfig {
   ControllerGains gains;
   ManoeuvreConfig manoeuvres;
   VerticalManoeuvreConfig vertical;
+  HeadingTurnConfig turns;
   double physics_rate_hz = 2000.0;
   double start_altitude_m = 1.5;  // starts hovering here, above the NED origin
 };

@@ -12,7 +12,7 @@ namespace imubridge::sim {
 
 namespace {
 
-constexpr std::array<std::string_view, 5> kNames{"paper", "center", "hover", "agile", "climb"};
+constexpr std::array<std::string_view, 6> kNames{"paper", "center", "hover", "agile", "climb", "survey"};
 
 }  // namespace
 
@@ -35,6 +35,12 @@ SimConfig make_scenario(std::string_view name, std::uint64_t seed, std::optional
     config.flight.manoeuvres.roll_share = 0.5;
     // Climbs and descents on top, as an identification flight flies them: the thrust varies by tens of per cent.
     config.flight.vertical.enabled = name == "climb";
+  } else if (name == "survey") {
+    // The paper's pose, drag and manoeuvres, and the heading turned between legs as a survey flight turns it: a
+    // constant wind then turns through the body axes, which tells it apart from a sensor tilt or bias (not, from the
+    // IMU alone, from a steady ground velocity: docs/effects.md).
+    config.imu.pose = ImuPose::paper(kPaperR, kPaperBeta, kPaperAlpha);
+    config.flight.turns.enabled = true;
   } else if (name == "hover") {
     config.flight.manoeuvres.enabled = false;
     config.duration_s = 10.0;

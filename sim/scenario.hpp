@@ -8,6 +8,8 @@
 //            thrust varies by up to a fifth, and roll and pitch both turn the sensor.
 //   climb  - the agile flight (same roll and pitch plan) with climbs and descents of 0.3-1 m at up to g/2: the thrust
 //            varies by tens of per cent.
+//   survey - the paper's flight with turns of the heading between legs of several seconds: a constant wind turns
+//            through the body axes, where no sensor tilt or bias follows it.
 #include <cstdint>
 #include <numbers>
 #include <optional>

@@ -112,6 +112,14 @@ std::pair<CosineCurve*, Manoeuvre> draw_vertical(const VerticalManoeuvreConfig& 
   return {&height, m};
 }
 
+// The next turn: a step of the yaw rate (to the rate, held, back to zero), with a leg after it.
+std::pair<CosineCurve*, Manoeuvre> draw_turn(const HeadingTurnConfig& c, CosineCurve& yaw_rate, Rng& rng) {
+  Manoeuvre m =
+      draw_manoeuvre(rng, c.rate_min_radps, c.rate_max_radps, c.ramp_min_s, c.ramp_max_s, c.hold_min_s, c.hold_max_s);
+  m.kind = Manoeuvre::Kind::step;
+  return {&yaw_rate, m};
+}
+
 }  // namespace
 
 Trajectory plan_manoeuvres(const ManoeuvreConfig& c, double duration_s, Rng& rng) {
@@ -134,13 +142,25 @@ CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& c, double du
   return height;
 }
 
+CosineCurve plan_heading_turns(const HeadingTurnConfig& c, double duration_s, Rng& rng) {
+  CosineCurve yaw_rate;
+  double next_start_s = c.first_start_s;
+  for (bool done = !c.enabled; !done;) {
+    draw_next(next_start_s, done, c.leg_min_s, c.leg_max_s, duration_s, rng,
+              [&](Rng& r) { return draw_turn(c, yaw_rate, r); });
+  }
+  return yaw_rate;
+}
+
 FlightPlan::FlightPlan(const ManoeuvreConfig& manoeuvres, const VerticalManoeuvreConfig& vertical, double duration_s,
-                       Rng attitude_rng, Rng vertical_rng)
+                       Rng attitude_rng, Rng vertical_rng, const HeadingTurnConfig& heading, Rng heading_rng)
     : manoeuvres_(manoeuvres),
       vertical_(vertical),
+      heading_(heading),
       duration_s_(duration_s),
       attitude_{std::move(attitude_rng), manoeuvres.first_start_s, !manoeuvres.enabled},
-      altitude_{std::move(vertical_rng), vertical.first_start_s, !vertical.enabled} {}
+      altitude_{std::move(vertical_rng), vertical.first_start_s, !vertical.enabled},
+      turns_{std::move(heading_rng), heading.first_start_s, !heading.enabled} {}
 
 // Every manoeuvre starting at or before t is drawn, so the curves' knots around t are the whole plan's; a curve whose
 // next manoeuvre is still to come holds 0 until it, as the whole plan's does between its manoeuvres.
@@ -153,6 +173,10 @@ void FlightPlan::draw_until(double t) {
     draw_next(altitude_.next_start_s, altitude_.done, vertical_.gap_min_s, vertical_.gap_max_s, duration_s_,
               altitude_.rng, [&](Rng& r) { return draw_vertical(vertical_, drawn_.height, r); });
   }
+  while (!turns_.done && turns_.next_start_s <= t) {
+    draw_next(turns_.next_start_s, turns_.done, heading_.leg_min_s, heading_.leg_max_s, duration_s_, turns_.rng,
+              [&](Rng& r) { return draw_turn(heading_, drawn_.yaw_rate, r); });
+  }
 }
 
 FlightReference FlightPlan::at(double t) {
@@ -164,6 +188,7 @@ void FlightPlan::forget_before(double t) {
   drawn_.roll.forget_before(t);
   drawn_.pitch.forget_before(t);
   drawn_.height.forget_before(t);
+  drawn_.yaw_rate.forget_before(t);
 }
 
 }  // namespace imubridge::sim

@@ -1,7 +1,7 @@
 #pragma once
 // The flight plan: roll and pitch angle references made of manoeuvres like the paper's laboratory flight
 // (doublets, sinusoid bursts, steps), with seeded random amplitudes, lengths and timing; optionally, the same kinds
-// of manoeuvre on the altitude (climbs and descents), which make the thrust vary.
+// of manoeuvre on the altitude (climbs and descents), which make the thrust vary, and turns of the heading.
 #include <cstddef>
 #include <utility>
 #include <vector>
@@ -58,6 +58,19 @@ struct VerticalManoeuvreConfig {
   double max_acceleration_mps2 = 0.5 * kGravity;
 };
 
+// Turns of the heading, as a survey flight makes them between its legs: the yaw-rate reference ramps up to a rate,
+// holds it and ramps back to zero (a turn of some 30 to 180 degrees), then the heading is held for a leg of several
+// seconds. Without turns a constant wind is, from the IMU alone, a constant force in body axes like a sensor tilt;
+// turning rotates it through the body axes, where no tilt follows. Off by default.
+struct HeadingTurnConfig {
+  bool enabled = false;
+  double first_start_s = 2.0;
+  double leg_min_s = 3.0, leg_max_s = 7.0;             // heading held between turns
+  double rate_min_radps = 0.25, rate_max_radps = 0.5;  // held yaw rate of a turn, either way
+  double ramp_min_s = 0.5, ramp_max_s = 1.0;           // from no yaw rate to the turn's, and back
+  double hold_min_s = 1.0, hold_max_s = 4.0;           // the turn's rate held
+};
+
 // What the controller tracks: body roll/pitch angles with their rates and accelerations, yaw rate, and the height
 // above the hold altitude (m, up) with its rate and acceleration.
 struct FlightReference {
@@ -68,21 +81,24 @@ struct FlightReference {
 
 struct Trajectory {
   CosineCurve roll, pitch, height;
-  FlightReference at(double t) const { return {roll.at(t), pitch.at(t), 0.0, height.at(t)}; }
+  CosineCurve yaw_rate;  // its value is the rate reference (rad/s); empty without heading turns
+  FlightReference at(double t) const { return {roll.at(t), pitch.at(t), yaw_rate.at(t).value, height.at(t)}; }
 };
 
 // Manoeuvres start after the lead-in and all end before `duration_s` - 1 s. Fills roll and pitch.
 Trajectory plan_manoeuvres(const ManoeuvreConfig& config, double duration_s, Rng& rng);
 // The same for the altitude: the height curve, empty when disabled.
 CosineCurve plan_vertical_manoeuvres(const VerticalManoeuvreConfig& config, double duration_s, Rng& rng);
+// The same for the heading: the yaw-rate curve, empty when disabled.
+CosineCurve plan_heading_turns(const HeadingTurnConfig& config, double duration_s, Rng& rng);
 
-// The plan of plan_manoeuvres() and plan_vertical_manoeuvres() (from the same generators, it reads the same at every
-// time), drawn as the flight reaches it and released behind it: a flight of any length holds only the manoeuvres
-// around the present.
+// The plan of plan_manoeuvres(), plan_vertical_manoeuvres() and plan_heading_turns() (from the same generators, it
+// reads the same at every time), drawn as the flight reaches it and released behind it: a flight of any length holds
+// only the manoeuvres around the present.
 class FlightPlan {
  public:
   FlightPlan(const ManoeuvreConfig& manoeuvres, const VerticalManoeuvreConfig& vertical, double duration_s,
-             Rng attitude_rng, Rng vertical_rng);
+             Rng attitude_rng, Rng vertical_rng, const HeadingTurnConfig& heading = {}, Rng heading_rng = Rng(0));
 
   // The reference at t; t must not go back before the last forget_before().
   FlightReference at(double t);
@@ -101,8 +117,9 @@ class FlightPlan {
 
   ManoeuvreConfig manoeuvres_;
   VerticalManoeuvreConfig vertical_;
+  HeadingTurnConfig heading_;
   double duration_s_;
-  Sequence attitude_, altitude_;
+  Sequence attitude_, altitude_, turns_;
   Trajectory drawn_;
 };
 
