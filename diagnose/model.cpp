@@ -166,7 +166,7 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
   // parameters of effects acting there, and every drag coefficient once drag is in the dynamics.
   input_parameter_.assign(parameters_.size(), false);
   const bool drag_in_dynamics =
-      std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->drag_in_dynamics(); });
+      std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->stages().drag_in_dynamics; });
   if (filter_runs()) {
     // The filter runs the whole model: every parameter moves its velocity.
     input_parameter_.assign(parameters_.size(), true);
@@ -211,12 +211,16 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
 
   // 1. gyro
   in.gyro = s.gyro;
-  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->adjust_gyro(params_of(i), setup_, in.gyro);
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->stages().gyro) effects_[i]->adjust_gyro(params_of(i), setup_, in.gyro);
+  }
   in.gyro_rate = s.gyro_rate;
 
   // 2. timing: the accelerometer's sample at t saw the motion of t - tau.
   double tau = 0.0;
-  for (std::size_t i = 0; i < effects_.size(); ++i) tau += effects_[i]->time_offset(params_of(i));
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->stages().timing) tau += effects_[i]->time_offset(params_of(i));
+  }
   if (tau != 0.0) {
     in.gyro = delayed(t, in.gyro, tau);
     in.gyro_rate = delayed(t, in.gyro_rate, tau);
@@ -230,10 +234,11 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
   Vector3d wind = Vector3d::Zero();
   bool drag_in_dynamics = false, measured_thrust = false;
   for (std::size_t i = 0; i < effects_.size(); ++i) {
-    effects_[i]->add_drag(params_of(i), setup_, law);
-    wind += effects_[i]->wind_ned(params_of(i));
-    drag_in_dynamics = drag_in_dynamics || effects_[i]->drag_in_dynamics();
-    measured_thrust = measured_thrust || effects_[i]->measured_thrust();
+    const Stages stages = effects_[i]->stages();
+    if (stages.drag) effects_[i]->add_drag(params_of(i), setup_, law);
+    if (stages.wind) wind += effects_[i]->wind_ned(params_of(i));
+    drag_in_dynamics = drag_in_dynamics || stages.drag_in_dynamics;
+    measured_thrust = measured_thrust || stages.measured_thrust;
   }
   in.thrust = measured_thrust ? s.thrust : std::vector<double>(n, kGravity);
 
@@ -350,7 +355,9 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   const std::span<const Vector3d> measured(signals().accel.data() + range.first, range.count);
   // The effects' own drag (the paper's mu is inside eq. 14).
   DragLaw effect_drag;
-  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_drag(params_of(i), setup_, effect_drag);
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->adds_drag()) effects_[i]->add_drag(params_of(i), setup_, effect_drag);
+  }
 
   // The base model's predicted reading in IMU axes (the paper model fills the axes it diagnoses).
   std::vector<Vector3d> predicted(range.count, Vector3d::Zero());
@@ -392,8 +399,9 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
     }
   }
   // 4. sensor
-  for (std::size_t i = 0; i < effects_.size(); ++i)
-    effects_[i]->adjust_sensor(params_of(i), setup_, predicted, measured);
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->stages().sensor) effects_[i]->adjust_sensor(params_of(i), setup_, predicted, measured);
+  }
 
   // In the residual's frame: the paper model's sensor axes; the full model's body axes, where the thrust (unknown
   // per sample) only has a z component, so rows x and y.
@@ -410,7 +418,9 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
     }
   }
   // 5. prediction
-  for (std::size_t i = 0; i < effects_.size(); ++i) effects_[i]->add_prediction(params_of(i), ctx, e.predicted);
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->stages().prediction) effects_[i]->add_prediction(params_of(i), ctx, e.predicted);
+  }
   if (setup_.lowpass_hz > 0.0) {
     for (std::size_t i = 0; i < axes; ++i) zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, signals().rate_hz);
   }

@@ -85,6 +85,38 @@ TEST(Effects, LibraryHasEveryDocumentedEffectOnce) {
   EXPECT_EQ(find_effect("no_such_effect"), nullptr);
 }
 
+// The model calls an effect's hooks only for the stages it declares (Effect::stages), so a hook that acts outside
+// them would be silently unused, and a declared stage without a hook would mark inputs as moving for nothing.
+TEST(Effects, EachEffectActsThroughTheStagesItDeclaresAndNoOthers) {
+  const Signals s = synthetic_signals(1.0);
+  const ModelSetup setup = paper_setup(s);
+  for (const auto& e : effect_library()) {
+    SCOPED_TRACE(std::string(e->name()));
+    std::vector<double> p;
+    for (const Parameter& parameter : e->parameters(setup)) {
+      const bool bounded = std::isfinite(parameter.lower) && std::isfinite(parameter.upper);
+      p.push_back(bounded ? parameter.lower + 0.37 * (parameter.upper - parameter.lower) : 0.37);
+    }
+    const Stages declared = e->stages();
+
+    std::vector<Vector3d> gyro(3, Vector3d(0.1, -0.2, 0.3));
+    e->adjust_gyro(p, setup, gyro);
+    EXPECT_EQ(gyro[0] != Vector3d(0.1, -0.2, 0.3), declared.gyro);
+    EXPECT_EQ(e->time_offset(p) != 0.0, declared.timing);
+    EXPECT_EQ(!e->wind_ned(p).isZero(), declared.wind);
+    DragLaw law;
+    e->add_drag(p, setup, law);
+    EXPECT_EQ(!law.k.isZero() || !law.mu.isZero(), declared.drag);
+    std::vector<Vector3d> predicted(3, Vector3d(1.0, -2.0, -9.0));
+    const std::vector<Vector3d> measured(3, Vector3d(1.5, -1.5, -9.5));
+    e->adjust_sensor(p, setup, predicted, measured);
+    EXPECT_EQ(predicted[0] != Vector3d(1.0, -2.0, -9.0), declared.sensor);
+    // Every effect acts somewhere.
+    EXPECT_TRUE(declared.gyro || declared.timing || declared.wind || declared.drag || declared.drag_in_dynamics ||
+                declared.measured_thrust || declared.sensor || declared.prediction);
+  }
+}
+
 TEST(Effects, DragEffectsAddTheirCoefficientsPerDiagnosedAxis) {
   const Signals s = synthetic_signals(1.0);
   DragLaw law;
@@ -159,9 +191,9 @@ TEST(Effects, StageFlagsAndApplicability) {
   full.base = BaseModel::kFull;
   EXPECT_DOUBLE_EQ(effect("time_offset").time_offset(std::vector<double>{0.02}), 0.02);
   EXPECT_EQ(effect("wind").wind_ned(std::vector<double>{3.0, -1.0}), Vector3d(3.0, -1.0, 0.0));
-  EXPECT_TRUE(effect("thrust").measured_thrust());
+  EXPECT_TRUE(effect("thrust").stages().measured_thrust);
   EXPECT_TRUE(effect("thrust").why_not(full, {}).has_value());
-  EXPECT_TRUE(effect("self_consistent_velocity").drag_in_dynamics());
+  EXPECT_TRUE(effect("self_consistent_velocity").stages().drag_in_dynamics);
   EXPECT_TRUE(effect("self_consistent_velocity").why_not(reference, {}).has_value());
   EXPECT_FALSE(effect("self_consistent_velocity").why_not(imu, {}).has_value());
   // The full model has no drag until one is added: no wind, no self-consistent velocity before.

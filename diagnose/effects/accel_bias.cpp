@@ -7,6 +7,7 @@ namespace {
 class AccelBias final : public Effect {
  public:
   std::string_view name() const override { return "accel_bias"; }
+  Stages stages() const override { return {.prediction = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     // g sin(alpha) is a constant too: only a thrust that varies (T sin(alpha)) tells the two apart.
     if (setup.base == BaseModel::kPaper && !contains(in_model, "thrust"))

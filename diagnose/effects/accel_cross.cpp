@@ -8,6 +8,7 @@ namespace {
 class AccelCross final : public Effect {
  public:
   std::string_view name() const override { return "accel_cross"; }
+  Stages stages() const override { return {.sensor = true}; }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     const auto& sensor = setup.signals->horizontal_sensor_axes;
     std::vector<Parameter> out;

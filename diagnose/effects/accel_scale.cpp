@@ -7,6 +7,7 @@ namespace {
 class AccelScale final : public Effect {
  public:
   std::string_view name() const override { return "accel_scale"; }
+  Stages stages() const override { return {.sensor = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
     // Eq. (14) is linear in g sin(alpha), r cos(beta), r sin(beta) and mu, all per axis: scaling the axis scales them.
     if (setup.base == BaseModel::kPaper) return "absorbed by eq. (14)'s per-axis r, alpha and mu";

@@ -1,7 +1,8 @@
 #pragma once
 // One named, documented extension of the accelerometer model (docs/effects.md): its parameters, whether it can be
-// tried on these data, and what it does to the model. The model (diagnose/model.hpp) evaluates in fixed stages and
-// calls each effect's hook for every stage; an effect overrides only the one or two stages it acts in:
+// tried on these data, and what it does to the model. The model (diagnose/model.hpp) evaluates in fixed stages; an
+// effect declares the stages it acts in (Effect::stages) and overrides their hooks, and the model calls its hooks
+// for those stages only:
 //   1. gyro        adjust_gyro          the gyro the model uses (gyro bias)
 //   2. timing      time_offset          the model's inputs are taken at t - tau (accel-gyro time offset)
 //   3. velocity    wind_ned, drag_in_dynamics, add_drag
@@ -43,6 +44,19 @@ struct ModelSetup {
   // kFilter: the filter's noises (the measurement noise set from the data: docs/identification.md).
   estimator::DragVelocityConfig filter{};
   std::size_t filter_block = 1;  // samples per block mean the filter runs on (identification_block)
+};
+
+// The stages an effect acts in. One declaration: the model calls only these stages' hooks, and reads from it which
+// effects change its inputs (stages 1-3) and which add to the drag law, so no separate flag can disagree with them.
+struct Stages {
+  bool gyro = false;              // 1: adjust_gyro
+  bool timing = false;            // 2: time_offset
+  bool wind = false;              // 3: wind_ned
+  bool drag = false;              // 3: add_drag
+  bool drag_in_dynamics = false;  // 3: the drag law acts in the vehicle's dynamics, which give the velocity
+  bool measured_thrust = false;   // T from the body-z reading instead of g
+  bool sensor = false;            // 4: adjust_sensor
+  bool prediction = false;        // 5: add_prediction
 };
 
 struct Parameter {
@@ -114,16 +128,18 @@ class Effect {
     (void)start;
     return {};
   }
-  // True when stages 1-3 depend on this effect's parameters (the model then recomputes its inputs every time).
-  virtual bool changes_inputs() const { return false; }
+  virtual Stages stages() const = 0;
+  // Stages 1-3 depend on this effect's parameters: the model then recomputes its inputs at every evaluation.
+  bool changes_inputs() const {
+    const Stages s = stages();
+    return s.gyro || s.timing || s.wind || s.drag_in_dynamics;
+  }
+  bool adds_drag() const { return stages().drag; }
 
   virtual void adjust_gyro(std::span<const double>, const ModelSetup&, std::vector<Eigen::Vector3d>&) const {}
   virtual double time_offset(std::span<const double>) const { return 0.0; }
   virtual Eigen::Vector3d wind_ned(std::span<const double>) const { return Eigen::Vector3d::Zero(); }
-  virtual bool drag_in_dynamics() const { return false; }
-  virtual bool adds_drag() const { return false; }  // true for effects that override add_drag
   virtual void add_drag(std::span<const double>, const ModelSetup&, DragLaw&) const {}
-  virtual bool measured_thrust() const { return false; }
   // `predicted` and `measured` hold the range's samples in IMU axes (the paper model fills only its axes).
   virtual void adjust_sensor(std::span<const double>, const ModelSetup&, std::span<Eigen::Vector3d> predicted,
                              std::span<const Eigen::Vector3d> measured) const {

@@ -19,12 +19,12 @@ std::vector<int> gyro_axes(const ModelSetup& setup) {
 class GyroBias final : public Effect {
  public:
   std::string_view name() const override { return "gyro_bias"; }
+  Stages stages() const override { return {.gyro = true}; }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     std::vector<Parameter> out;
     for (int axis : gyro_axes(setup)) out.push_back({"bias." + axis_name(axis), "rad/s", 0.0, -1.0, 1.0});
     return out;
   }
-  bool changes_inputs() const override { return true; }
   // A hovering vehicle's roll and pitch stay bounded, so over the training window its mean roll and pitch rates are
   // the gyro's bias: from zero, eq. (12)'s velocity can be so far off that the fit finds no way back. The yaw may
   // turn freely and starts at zero.

@@ -10,6 +10,7 @@ namespace {
 class LeverArmZ final : public Effect {
  public:
   std::string_view name() const override { return "lever_arm_z"; }
+  Stages stages() const override { return {.prediction = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
     if (setup.base == BaseModel::kFull) return "the full model's lever arm is already three-dimensional";
     return std::nullopt;

@@ -7,10 +7,10 @@ namespace {
 class LinearDrag final : public Effect {
  public:
   std::string_view name() const override { return "linear_drag"; }
+  Stages stages() const override { return {.drag = true}; }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     return per_axis(setup, "k", "1/s", 0.0, 100.0);
   }
-  bool adds_drag() const override { return true; }
   void add_drag(std::span<const double> p, const ModelSetup& setup, DragLaw& law) const override {
     for (std::size_t i = 0; i < setup.axes.size(); ++i) law.k[setup.axes[i]] += p[i];
   }

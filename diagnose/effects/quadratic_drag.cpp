@@ -8,6 +8,7 @@ namespace {
 class QuadraticDrag final : public Effect {
  public:
   std::string_view name() const override { return "quadratic_drag"; }
+  Stages stages() const override { return {.drag = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
     if (setup.base == BaseModel::kPaper) return "eq. (14) already has the quadratic drag mu";
     return std::nullopt;
@@ -15,7 +16,6 @@ class QuadraticDrag final : public Effect {
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     return per_axis(setup, "mu", "1/m", 0.0, 100.0);
   }
-  bool adds_drag() const override { return true; }
   void add_drag(std::span<const double> p, const ModelSetup& setup, DragLaw& law) const override {
     for (std::size_t i = 0; i < setup.axes.size(); ++i) law.mu[setup.axes[i]] += p[i];
   }

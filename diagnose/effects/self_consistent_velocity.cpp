@@ -9,6 +9,7 @@ namespace {
 class SelfConsistentVelocity final : public Effect {
  public:
   std::string_view name() const override { return "self_consistent_velocity"; }
+  Stages stages() const override { return {.drag_in_dynamics = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     if (setup.velocity == VelocitySource::kReference) return "the velocity comes from the reference trajectory";
     if (setup.velocity == VelocitySource::kFilter) return "the filter's velocity has the drag in its dynamics already";
@@ -18,8 +19,6 @@ class SelfConsistentVelocity final : public Effect {
     return std::nullopt;
   }
   std::vector<Parameter> parameters(const ModelSetup&) const override { return {}; }
-  bool changes_inputs() const override { return true; }
-  bool drag_in_dynamics() const override { return true; }
 };
 
 }  // namespace

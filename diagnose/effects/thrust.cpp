@@ -8,13 +8,13 @@ namespace {
 class Thrust final : public Effect {
  public:
   std::string_view name() const override { return "thrust"; }
+  Stages stages() const override { return {.measured_thrust = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
     if (setup.base == BaseModel::kFull)
       return "the full model's residual is in body axes, where the thrust has no horizontal component";
     return std::nullopt;
   }
   std::vector<Parameter> parameters(const ModelSetup&) const override { return {}; }
-  bool measured_thrust() const override { return true; }
 };
 
 }  // namespace

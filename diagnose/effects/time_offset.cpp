@@ -8,8 +8,8 @@ namespace {
 class TimeOffset final : public Effect {
  public:
   std::string_view name() const override { return "time_offset"; }
+  Stages stages() const override { return {.timing = true}; }
   std::vector<Parameter> parameters(const ModelSetup&) const override { return {{"tau", "s", 0.0, -0.25, 0.25}}; }
-  bool changes_inputs() const override { return true; }
   double time_offset(std::span<const double> p) const override { return p[0]; }
 };
 

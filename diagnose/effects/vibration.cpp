@@ -27,6 +27,7 @@ double line_power(std::span<const double> t, const AxisValues& residual, double 
 class Vibration final : public Effect {
  public:
   std::string_view name() const override { return "vibration"; }
+  Stages stages() const override { return {.prediction = true}; }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     const double nyquist = 0.5 * sample_rate_hz(setup.signals->t);
     std::vector<Parameter> out{{"frequency", "Hz", 0.0, 0.0, nyquist}};

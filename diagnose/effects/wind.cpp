@@ -7,6 +7,7 @@ namespace {
 class Wind final : public Effect {
  public:
   std::string_view name() const override { return "wind"; }
+  Stages stages() const override { return {.wind = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     const bool drag =
         setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
@@ -25,7 +26,6 @@ class Wind final : public Effect {
   std::vector<Parameter> parameters(const ModelSetup&) const override {
     return {{"north", "m/s", 0.0, -30.0, 30.0}, {"east", "m/s", 0.0, -30.0, 30.0}};
   }
-  bool changes_inputs() const override { return true; }
   // Drag on v - w is not convex in w: from no wind, LM can settle in a linear-drag-like minimum. So the fit also
   // starts from a moderate breeze (4 m/s, mid-range for a small multirotor's flying weather) from each quarter.
   std::vector<std::vector<double>> more_starts(std::span<const double>) const override {
