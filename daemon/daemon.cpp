@@ -25,7 +25,6 @@
 #include "pipeline/estimation_stage.hpp"
 #include "pipeline/link_recorder.hpp"
 #include "pipeline/session_config.hpp"
-#include "replay/replayer.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::daemon {
@@ -100,20 +99,6 @@ std::string mib(std::uint64_t bytes) { return fmt::format("{:.1f} MiB", static_c
 
 }  // namespace
 
-estimator::ModelParams load_params(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream text;
-  text << in.rdbuf();
-  if (!in) throw std::invalid_argument(path.string() + ": cannot read the parameters file");
-  return replay::parse_params(text.str(), path.string());
-}
-
-void save_params(const fs::path& path, const estimator::ModelParams& params) {
-  std::ofstream out(path, std::ios::trunc);
-  out << nlohmann::json(params).dump(2) << "\n";
-  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
-}
-
 void configure_logging(const Config& config) {
   spdlog::sink_ptr sink;
   if (config.log_file) {
@@ -173,7 +158,7 @@ struct Daemon::Link {
 Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     : config_(std::move(config)),
       config_file_(std::move(config_file)),
-      params_(config_.params ? load_params(*config_.params) : estimator::ModelParams{}),
+      params_(config_.params ? estimator::load_params(*config_.params) : estimator::ModelParams{}),
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       commit_timer_(io_),
       stats_timer_(io_),

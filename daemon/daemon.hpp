@@ -30,11 +30,6 @@ namespace imubridge::daemon {
 
 class Outputs;
 
-// PARAMS.json as `imubridge identify` writes it. Throws std::invalid_argument naming the file and what is wrong.
-estimator::ModelParams load_params(const std::filesystem::path& path);
-// PARAMS.json, indented, to `path`. Throws std::runtime_error when it cannot be written.
-void save_params(const std::filesystem::path& path, const estimator::ModelParams& params);
-
 // spdlog's default logger for the daemon: config.log_file if set, else stderr; on the journal, lines carry a syslog
 // priority instead of a timestamp (journald keeps its own). Called again on SIGHUP, which reopens the file.
 void configure_logging(const Config& config);

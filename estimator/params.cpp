@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <stdexcept>
 #include <string_view>
 
@@ -326,6 +328,28 @@ void from_json(const json& j, ModelParams& p) {
   if (j.contains("full")) p.full = read_full(j.at("full"), "full");
   if (j.contains("effects")) p.effects = read_effects(j.at("effects"), "effects");
   if (j.contains("identification")) p.identification = read_identification(j.at("identification"), "identification");
+}
+
+ModelParams parse_params(std::string_view json_text, const std::string& origin) {
+  try {
+    return json::parse(json_text).get<ModelParams>();
+  } catch (const std::exception& e) {  // nlohmann's parse and type errors, and the params' own range checks
+    throw std::invalid_argument(origin + " is not valid PARAMS.json: " + e.what());
+  }
+}
+
+ModelParams load_params(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  if (!in) throw std::invalid_argument(path.string() + ": cannot read the parameters file");
+  return parse_params(text.str(), path.string());
+}
+
+void save_params(const std::filesystem::path& path, const ModelParams& params) {
+  std::ofstream out(path, std::ios::trunc);
+  out << json(params).dump(2) << "\n";
+  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
 }
 
 }  // namespace imubridge::estimator

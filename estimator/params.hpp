@@ -3,6 +3,7 @@
 // angle also appears in degrees beside its radians for people (beta_deg, alpha_deg, mounting_deg,
 // wind_heading_deg). The defaults disable compensation until an identification fills them in.
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <optional>
@@ -68,5 +69,12 @@ void to_json(nlohmann::json& j, const Identification& id);
 void from_json(const nlohmann::json& j, Identification& id);
 void to_json(nlohmann::json& j, const ModelParams& p);
 void from_json(const nlohmann::json& j, ModelParams& p);
+
+// PARAMS.json text (a file, a run's params) as parameters; `origin` names it in the std::invalid_argument thrown.
+ModelParams parse_params(std::string_view json_text, const std::string& origin);
+// PARAMS.json as `imubridge identify` writes it. Throws std::invalid_argument naming the file and what is wrong.
+ModelParams load_params(const std::filesystem::path& path);
+// PARAMS.json, indented, to `path`. Throws std::runtime_error when it cannot be written.
+void save_params(const std::filesystem::path& path, const ModelParams& params);
 
 }  // namespace imubridge::estimator

@@ -1,4 +1,4 @@
-// libFuzzer target for reading PARAMS.json (estimator/params.hpp), the way replay::parse_params() reads it for
+// libFuzzer target for reading PARAMS.json (estimator/params.hpp), the way estimator::parse_params() reads it for
 // `imubridge run --params`, replay and evaluate. Input: the file's text. Reading either gives ModelParams or throws
 // nlohmann's json::exception (not JSON, a value of the wrong type) or std::invalid_argument (the strict checks);
 // parse_params() would fold any exception into std::invalid_argument, so the target calls what it wraps to let any

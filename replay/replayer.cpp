@@ -70,17 +70,9 @@ pipeline::StageAxes recorded_axes(const store::Store& store, const store::Sessio
 
 }  // namespace
 
-estimator::ModelParams parse_params(std::string_view json_text, const std::string& origin) {
-  try {
-    return nlohmann::json::parse(json_text).get<estimator::ModelParams>();
-  } catch (const std::exception& e) {  // nlohmann's parse and type errors, and the params' own range checks
-    throw std::invalid_argument(origin + " is not valid PARAMS.json: " + e.what());
-  }
-}
-
 estimator::ModelParams replay_params(const store::Store& store, std::int64_t session) {
   for (const auto& run : store.runs(session)) {
-    if (run.info.kind == "live") return parse_params(run.info.params_json, "run " + std::to_string(run.id));
+    if (run.info.kind == "live") return estimator::parse_params(run.info.params_json, "run " + std::to_string(run.id));
   }
   return {};
 }

@@ -32,8 +32,6 @@ struct ReplayResult {
   std::map<std::string, protocol::DecoderCounters> counters;  // by link name, summed over its framing layers
 };
 
-// PARAMS.json text (a file, a run's params) as parameters; `origin` names it in the std::invalid_argument thrown.
-estimator::ModelParams parse_params(std::string_view json_text, const std::string& origin);
 // What a replay uses unless told otherwise: the parameters of the session's live run, the defaults if it has none.
 estimator::ModelParams replay_params(const store::Store& store, std::int64_t session);
 

@@ -1,10 +1,12 @@
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "estimator/params.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -253,6 +255,33 @@ TEST(ModelParamsJson, RefusesEffectParametersOutOfRange) {
   j = identified();
   j["full"]["accel_cross"][2][2] = 0.01;
   EXPECT_NE(read_error(j).find("accel_cross"), std::string::npos);
+}
+
+// The file functions every command shares: what save_params() writes, load_params() reads back equal.
+TEST(ParamsFile, SavedParametersLoadBackEqual) {
+  const test::TempDir dir;
+  const ModelParams p = identified();
+  save_params(dir / "params.json", p);
+  EXPECT_EQ(load_params(dir / "params.json"), p);
+}
+
+TEST(ParamsFile, ErrorsNameTheFile) {
+  const test::TempDir dir;
+  try {
+    (void)load_params(dir / "missing.json");
+    FAIL() << "a missing file was read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.json: cannot read the parameters file"), std::string::npos)
+        << e.what();
+  }
+  std::ofstream(dir / "bad.json") << R"({"full": {"drag_linaer": [0.3, 0.4]}})";
+  try {
+    (void)load_params(dir / "bad.json");
+    FAIL() << "an unknown key was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.json is not valid PARAMS.json: "), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)parse_params("{", "run 3"), std::invalid_argument);
 }
 
 }  // namespace

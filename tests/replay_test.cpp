@@ -149,7 +149,7 @@ TEST_P(ReplayEveryFormat, WithTheLiveRunsParamsReproducesItBitForBit) {
   const auto runs = store.runs(rec.session);
   ASSERT_EQ(runs.size(), 2u);
   EXPECT_EQ(runs[1].info.kind, "replay");
-  EXPECT_EQ(parse_params(runs[1].info.params_json, "the replay"), paper_params());
+  EXPECT_EQ(estimator::parse_params(runs[1].info.params_json, "the replay"), paper_params());
 }
 
 INSTANTIATE_TEST_SUITE_P(Replay, ReplayEveryFormat,
@@ -172,7 +172,7 @@ TEST_F(Replay, TwoReplaysAreIdenticalAndUseTheDefaultsWithoutALiveRun) {
   const auto estimates = estimates_by_link(store, first.run);
   ASSERT_FALSE(estimates.empty());
   EXPECT_TRUE(std::isnan(estimates.begin()->second.front().vx));
-  EXPECT_EQ(parse_params(store.runs(rec.session).front().info.params_json, "run"), estimator::ModelParams{});
+  EXPECT_EQ(estimator::parse_params(store.runs(rec.session).front().info.params_json, "run"), estimator::ModelParams{});
 }
 
 TEST_F(Replay, GivenParamsOverrideTheLiveRunsAndAreRecorded) {
@@ -182,7 +182,7 @@ TEST_F(Replay, GivenParamsOverrideTheLiveRunsAndAreRecorded) {
   estimator::ModelParams other = paper_params();
   other.full.drag_quadratic = {0.2, 0.2};
   const auto result = replay_session(store, rec.session, {.params = other});
-  EXPECT_EQ(parse_params(store.runs(rec.session).back().info.params_json, "the replay"), other);
+  EXPECT_EQ(estimator::parse_params(store.runs(rec.session).back().info.params_json, "the replay"), other);
   const auto live = estimates_by_link(store, *rec.live_run).begin()->second;
   const auto replayed = estimates_by_link(store, result.run).begin()->second;
   ASSERT_EQ(live.size(), replayed.size());

@@ -20,10 +20,10 @@
 #include "daemon/command.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
-#include "daemon/daemon.hpp"
 #include "diagnose/report.hpp"
 #include "diagnose/search.hpp"
 #include "estimator/identify.hpp"
+#include "estimator/params.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
 
@@ -210,10 +210,10 @@ int run(const DiagnoseCliOptions& o) {
   dg::write_report_html(diagnosis, dir);
   print_summary(diagnosis, o.report);
   if (o.out) {
-    daemon::save_params(*o.out, diagnosis.final_params);
+    est::save_params(*o.out, diagnosis.final_params);
     // Read back as run, replay and evaluate will: a model they would refuse is said so now, not at take-off.
     try {
-      (void)daemon::load_params(*o.out);
+      (void)est::load_params(*o.out);
       std::printf("wrote %s: the final model, as run, replay and evaluate estimate with it\n", o.out->c_str());
     } catch (const std::exception& e) {
       std::printf("warning: wrote %s, but the live estimator refuses it: %s\n", o.out->c_str(), e.what());

@@ -11,8 +11,8 @@
 
 #include "daemon/command.hpp"
 #include "daemon/commands/session_windows.hpp"
-#include "daemon/daemon.hpp"
 #include "estimator/identify.hpp"
+#include "estimator/params.hpp"
 #include "estimator/velocity_scores.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
@@ -37,7 +37,7 @@ json to_json(const est::VelocityError& e) {
 }
 
 int run(const EvaluateCliOptions& o) {
-  const est::ModelParams params = daemon::load_params(o.params);
+  const est::ModelParams params = est::load_params(o.params);
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session = pipeline::read_session_series(
       store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes});

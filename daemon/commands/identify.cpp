@@ -19,9 +19,9 @@
 #include "daemon/command.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
-#include "daemon/daemon.hpp"
 #include "diagnose/filter_identification.hpp"
 #include "estimator/constants.hpp"
+#include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
 #include "pipeline/session_series.hpp"
@@ -195,7 +195,7 @@ int run(const IdentifyCliOptions& o) {
                                          ? diagnose::identify_by_filter_error(session.series, options)
                                          : est::identify(session.series, options);
 
-  daemon::save_params(o.out, result.params);
+  est::save_params(o.out, result.params);
   if (!result.fits.front().convergence.empty()) {
     const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
     write_convergence(curve, result.fits);

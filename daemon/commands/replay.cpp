@@ -15,6 +15,7 @@
 
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
+#include "estimator/params.hpp"
 #include "pipeline/session_config.hpp"
 #include "replay/replayer.hpp"
 #include "replay/session_lookup.hpp"
@@ -134,7 +135,7 @@ int replay_into_run(const ReplayCommandOptions& o) {
   store::Store store(o.db);
   const store::Session session = replay::find_session(store, o.session);
   replay::ReplayOptions options;
-  if (!o.params.empty()) options.params = replay::parse_params(read_file(o.params), o.params);
+  if (!o.params.empty()) options.params = estimator::parse_params(read_file(o.params), o.params);
   options.play = {.from_s = o.from_s, .to_s = o.to_s, .speed = parse_speed(o.speed.empty() ? "max" : o.speed)};
   if (!o.link.empty()) options.play.link = link_id(store, session, o.link);
   Progress progress(o.from_s.value_or(0), progress_end(store, session, o.to_s));
