@@ -23,6 +23,7 @@
 #include "daemon/serial_link.hpp"
 #include "daemon/vehicle_feedback.hpp"
 #include "pipeline/estimation_stage.hpp"
+#include "pipeline/radio_link.hpp"
 #include "pipeline/link_recorder.hpp"
 #include "pipeline/session_config.hpp"
 #include "store/store.hpp"
@@ -165,11 +166,12 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       watchdog_timer_(io_),
       resume_timer_(io_) {
   signals_.add(SIGUSR1);
-  // Each link's declared IMU axes; XBee radios (ids with the top bit) take their link's. Detection reports once per
-  // link: a declaration the data contradict is logged and recorded as an event.
+  // Each link's declared IMU axes; XBee radios while not recording (pipeline::is_unrecorded_radio_id) take their
+  // link's. Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
   pipeline::StageAxes axes;
   axes.declared = [this](std::uint32_t id) {
-    const std::size_t i = id & 0x80000000u ? (id >> 16) & 0x7fffu : links_.size();
+    const std::size_t i =
+        pipeline::is_unrecorded_radio_id(id) ? pipeline::unrecorded_radio_link_index(id) : links_.size();
     for (std::size_t k = 0; k < links_.size(); ++k) {
       if (k == i || (i == links_.size() && links_[k]->store_link == static_cast<std::int64_t>(id))) {
         return estimator::parse_imu_axes(links_[k]->config.axes);  // checked when the config was read
@@ -182,7 +184,8 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
     if (!resolution.mismatch) return;
     spdlog::warn("link {}: {}", id, *resolution.mismatch);
-    const std::int64_t link = id & 0x80000000u ? links_[(id >> 16) & 0x7fffu]->store_link : id;
+    const std::int64_t link =
+        pipeline::is_unrecorded_radio_id(id) ? links_[pipeline::unrecorded_radio_link_index(id)]->store_link : id;
     record([&](Recording& r) {
       r.store.append_event(r.session, {.link_id = link,
                                        .mono_ns = mono_now_ns(),
@@ -339,7 +342,7 @@ void Daemon::use_decoders() {
     link.decoder = std::make_unique<pipeline::LinkDecoder>(
         link.config.format, static_cast<std::uint32_t>(link.store_link), link.config.calibration,
         [radios = std::map<std::uint64_t, std::uint32_t>(), i](std::uint64_t source64) mutable {
-          const auto id = 0x80000000u | (i << 16) | static_cast<std::uint32_t>(radios.size());
+          const auto id = pipeline::unrecorded_radio_id(i, static_cast<std::uint32_t>(radios.size()));
           return radios.try_emplace(source64, id).first->second;
         });
   }

@@ -2,7 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "protocol/hex.hpp"
+#include "pipeline/radio_link.hpp"
 
 namespace imubridge::pipeline {
 namespace {
@@ -24,8 +24,10 @@ LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64
       format_name_(protocol::wire_format_name(format)),
       decoder_(format, static_cast<std::uint32_t>(link_id), calibration, [this](std::uint64_t source64) {
         auto [it, added] = radio_links_.try_emplace(source64, 0);
-        if (added) it->second = store_.add_link(session_, link_name_ + "/" + protocol::hex(source64, 8), format_name_,
-                                                "XBee radio " + protocol::hex(source64, 8) + " via " + link_name_);
+        if (added) {
+          it->second = store_.add_link(session_, radio_link_name(link_name_, source64), format_name_,
+                                       radio_link_description(link_name_, source64));
+        }
         return static_cast<std::uint32_t>(it->second);
       }) {}
 

@@ -15,7 +15,7 @@ namespace imubridge::pipeline {
 
 class LinkRecorder {
  public:
-  // `link_id` is the store link of the port; XBee radios get links of their own, named "<link name>/<source64>".
+  // `link_id` is the store link of the port; XBee radios get links of their own (pipeline/radio_link.hpp).
   LinkRecorder(store::Store& store, std::int64_t session, std::int64_t link_id, std::string link_name,
                protocol::WireFormat format, const protocol::Calibration& calibration);
   LinkRecorder(const LinkRecorder&) = delete;  // the decoder's radio resolver points back at this recorder

@@ -8,8 +8,8 @@
 
 #include "pipeline/estimation_stage.hpp"
 #include "pipeline/link_decoder.hpp"
+#include "pipeline/radio_link.hpp"
 #include "pipeline/session_config.hpp"
-#include "protocol/hex.hpp"
 #include "replay/session_lookup.hpp"
 
 namespace imubridge::replay {
@@ -30,7 +30,7 @@ struct ReplayedLink {
 };
 
 // A decoder per recorded link, keyed by the port link's store id. XBee radios resolve to the links the recorder made
-// for them ("<link>/<SOURCE64>", pipeline/link_recorder.hpp), so replayed samples carry the recorded link ids.
+// for them (pipeline/radio_link.hpp), so replayed samples carry the recorded link ids.
 std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, const store::Session& session) {
   auto ids = std::make_shared<std::map<std::string, std::int64_t>>();  // shared with the decoders' radio resolvers
   for (const auto& link : store.links(session.id)) ids->try_emplace(link.name, link.id);
@@ -41,8 +41,8 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
       throw std::invalid_argument("session " + std::to_string(session.id) + " records link \"" + recorded.name +
                                   "\" in its config but has no such link");
     }
-    auto resolve = [ids, prefix = recorded.name + "/"](std::uint64_t source64) {
-      const auto radio = ids->find(prefix + protocol::hex(source64, 8));
+    auto resolve = [ids, link = recorded.name](std::uint64_t source64) {
+      const auto radio = ids->find(pipeline::radio_link_name(link, source64));
       return radio == ids->end() ? kNoLink : static_cast<std::uint32_t>(radio->second);
     };
     decoders.emplace(
@@ -53,13 +53,15 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
   return decoders;
 }
 
-// Each store link's IMU axes as the session recorded them: a radio link ("<link>/<SOURCE64>") has its port link's.
+// Each store link's IMU axes as the session recorded them: a radio's link has the axes of the link it was heard
+// through.
 pipeline::StageAxes recorded_axes(const store::Store& store, const store::Session& session) {
   pipeline::StageAxes axes;
   const auto recorded = pipeline::recorded_links(session.info.config);
   for (const auto& link : store.links(session.id)) {
+    const auto radio = pipeline::parse_radio_link_name(link.name);
     for (const auto& r : recorded) {
-      if (link.name == r.name || link.name.starts_with(r.name + "/")) {
+      if (link.name == r.name || (radio && radio->link == r.name)) {
         axes.links[static_cast<std::uint32_t>(link.id)] = estimator::parse_imu_axes(r.imu_axes);
         break;
       }
