@@ -1,6 +1,7 @@
 #pragma once
-// The TOML configuration of `imubridge run` (/etc/imubridge/imubridge.toml) and the --link shorthand. Every key and
-// its meaning: docs/config.md. A mistake is reported as one line naming the file, the line and the key, e.g.
+// The TOML configuration of `imubridge run` (/etc/imubridge/imubridge.toml); the --link shorthand is
+// daemon/link_spec.hpp. Every key and its meaning: docs/config.md. A mistake is reported as one line naming the file,
+// the line and the key, e.g.
 //   imubridge.toml:7: unknown key 'link[0].baudrate' (did you mean 'baud'?)
 #include <cstdint>
 #include <filesystem>
@@ -29,20 +30,6 @@ std::string to_toml(const Config& config);
 // to 4000000. Any other rate would pass here and then fail at every reconnect, so it is refused with the
 // configuration. Throws std::invalid_argument naming the rate and the valid ones.
 void check_baud(std::int64_t baud);
-
-// A link given on the command line: "NAME=DEVICE:PROTOCOL[:BAUD]". DEVICE is a path, or "usb:VID:PID[:SERIAL]" with
-// VID and PID in hex.
-struct LinkSpec {
-  std::string name;
-  DeviceSelector device;
-  protocol::WireFormat format = protocol::WireFormat::imubridge;
-  std::optional<std::uint32_t> baud;
-};
-// Throws std::invalid_argument naming the spec and what is wrong with it.
-LinkSpec parse_link_spec(std::string_view spec);
-// Command-line links take precedence: a link of the same name keeps its other settings (bridge, calibration, ...)
-// and takes the spec's device, protocol and baud (if given); a new name adds a link with default settings.
-void apply_link_spec(Config& config, const LinkSpec& spec);
 
 // The whole configuration, once assembled from the file and the command line: it names at least one link, and
 // validate_links() (which parse_config() runs) finds nothing wrong with its links: names, backoff, feedback.

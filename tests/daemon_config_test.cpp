@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "daemon/config_file.hpp"
+#include "daemon/link_spec.hpp"
 #include "pipeline/session_config.hpp"
 
 namespace imubridge::daemon {

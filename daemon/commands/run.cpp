@@ -10,6 +10,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config_file.hpp"
 #include "daemon/daemon.hpp"
+#include "daemon/link_spec.hpp"
 
 namespace imubridge::cli {
 namespace {
