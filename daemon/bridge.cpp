@@ -4,8 +4,9 @@
 
 #include <algorithm>
 #include <array>
-#include <boost/asio/ip/tcp.hpp>
 #include <string>
+
+#include "daemon/asio.hpp"
 
 namespace imubridge::daemon {
 

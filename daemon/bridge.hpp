@@ -2,9 +2,6 @@
 // A link's raw bytes, both ways, between its serial port and network endpoints: imubridge can then sit between a
 // telemetry radio and a ground-control station that needs the same port (QGroundControl on udp://127.0.0.1:14550).
 // Behaviour per endpoint kind and the counters: docs/outputs.md, "Link bridge".
-#include <utility>  // before Boost.Asio
-
-#include <boost/asio/io_context.hpp>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -13,6 +10,7 @@
 #include <span>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 #include "daemon/endpoint.hpp"
 

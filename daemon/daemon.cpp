@@ -7,7 +7,6 @@
 #include <sys/statvfs.h>
 
 #include <algorithm>
-#include <boost/asio/post.hpp>
 #include <csignal>
 #include <ctime>
 #include <fstream>
@@ -16,6 +15,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "daemon/asio.hpp"
 #include "daemon/bridge.hpp"
 #include "daemon/config_file.hpp"
 #include "daemon/outputs.hpp"

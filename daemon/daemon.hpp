@@ -3,11 +3,6 @@
 // recorded (raw bytes, samples, losses: pipeline::LinkRecorder), estimated (pipeline::EstimationStage, into this
 // session's live run), forwarded to the link's bridge, and published on the outputs. Operations (signals, systemd,
 // storage limits, logs): docs/operations.md.
-#include <utility>  // before Boost.Asio, which uses std::exchange without including it
-
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/signal_set.hpp>
-#include <boost/asio/steady_timer.hpp>
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -16,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "estimator/params.hpp"

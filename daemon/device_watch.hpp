@@ -3,12 +3,12 @@
 // USB identity, the device nodes) would show up in. A reconnect then starts at once instead of waiting out its
 // backoff. Directories that do not exist are skipped; a watch that cannot be set up leaves the backoff alone.
 #include <array>
-#include <boost/asio/any_io_executor.hpp>
-#include <boost/asio/posix/stream_descriptor.hpp>
 #include <filesystem>
 #include <functional>
-#include <utility>  // before Boost.Asio, which uses std::exchange without including it
+#include <utility>
 #include <vector>
+
+#include "daemon/asio.hpp"
 
 namespace imubridge::daemon {
 

@@ -5,15 +5,14 @@
 #include <sys/un.h>
 
 #include <algorithm>
-#include <boost/asio/ip/tcp.hpp>
-#include <boost/asio/local/stream_protocol.hpp>
-#include <boost/asio/write.hpp>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
+
+#include "daemon/asio.hpp"
 
 namespace imubridge::daemon {
 namespace {

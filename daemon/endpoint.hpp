@@ -6,11 +6,6 @@
 #include <sys/types.h>
 
 #include <array>
-#include <boost/asio/basic_socket_acceptor.hpp>
-#include <boost/asio/generic/stream_protocol.hpp>
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/ip/udp.hpp>
-#include <boost/asio/steady_timer.hpp>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -18,9 +13,10 @@
 #include <span>
 #include <string>
 #include <string_view>
-#include <utility>  // before Boost.Asio
+#include <utility>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 
 namespace imubridge::daemon {

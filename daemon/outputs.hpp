@@ -1,10 +1,6 @@
 #pragma once
 // Live outputs of `imubridge run`: every sample (with its estimate, when there is one) as JSON to PlotJuggler over
 // UDP and as a line to every subscriber of a line stream. Message shapes and counters: docs/outputs.md.
-#include <utility>  // before Boost.Asio
-
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/ip/udp.hpp>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -14,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 #include "daemon/endpoint.hpp"
 #include "protocol/sample.hpp"

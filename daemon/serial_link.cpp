@@ -8,13 +8,13 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <boost/asio/write.hpp>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
+#include "daemon/asio.hpp"
 #include "daemon/port_list.hpp"
 
 namespace imubridge::daemon {

@@ -7,9 +7,6 @@
 #include <sys/stat.h>
 
 #include <array>
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/serial_port.hpp>
-#include <boost/asio/steady_timer.hpp>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -18,9 +15,10 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <utility>  // before Boost.Asio, which uses std::exchange without including it
+#include <utility>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 #include "daemon/device_watch.hpp"
 

@@ -3,16 +3,12 @@
 #include <gtest/gtest.h>
 #include <poll.h>
 
-#include <utility>  // before Boost.Asio
-
-#include <boost/asio/ip/tcp.hpp>
-#include <boost/asio/read.hpp>
-#include <boost/asio/write.hpp>
 #include <chrono>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/bridge.hpp"
 
 namespace imubridge::daemon {
