@@ -93,7 +93,8 @@ void BM_ReplayFullPipeline(benchmark::State& state) {
 }
 BENCHMARK(BM_ReplayFullPipeline)->Unit(benchmark::kMillisecond);
 
-// Thread CPU time: the figure is for one core, and other processes on the machine do not inflate it.
+// Thread CPU time: the target (docs/performance.md, "Replay") is for one core, and other processes on the machine
+// do not inflate it.
 std::int64_t thread_cpu_ns() {
   timespec t{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
