@@ -22,10 +22,11 @@
 #include "daemon/port_list.hpp"
 #include "daemon/serial_link.hpp"
 #include "daemon/vehicle_feedback.hpp"
+#include "daemon/live_sinks.hpp"
 #include "pipeline/estimation_stage.hpp"
+#include "pipeline/session_engine.hpp"
 #include "pipeline/radio_link.hpp"
-#include "pipeline/link_recorder.hpp"
-#include "pipeline/session_config.hpp"
+#include "pipeline/recorded_session.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::daemon {
@@ -134,6 +135,7 @@ struct Daemon::Recording {
 };
 
 struct Daemon::Link {
+  std::size_t index = 0;  // in links_, and the engine's link number
   LinkConfig config;
   std::unique_ptr<SerialLink> port;
   std::unique_ptr<LinkBridge> bridge;
@@ -145,6 +147,7 @@ struct Daemon::Link {
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
   std::map<std::uint32_t, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
+  std::unique_ptr<pipeline::ChunkDecoding> decoding;    // recorder or decoder, whichever the link has now
 
   const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }
   void retire_decoder() {
@@ -154,6 +157,62 @@ struct Daemon::Link {
     decoder.reset();
     clock_epochs.clear();  // a new decoder counts restarts from 0
   }
+};
+
+// A link's chunks through its recorder while recording, else through its decoder. A store that fails mid-chunk ends
+// the recording (the links go on): that chunk is decoded again without it, so its samples still reach the sinks.
+class Daemon::LinkDecoding final : public pipeline::ChunkDecoding {
+ public:
+  LinkDecoding(Daemon& daemon, Link& link) : daemon_(daemon), link_(link) {}
+  void decode(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
+              std::vector<protocol::Sample>& out) override {
+    if (link_.recorder) {
+      try {
+        link_.recorder->on_chunk(bytes, recv_mono_ns, recv_wall_ns, out);
+        return;
+      } catch (const store::StoreError& e) {
+        daemon_.stop_recording(daemon_.stopping_here(e.what()));
+        out.clear();
+      }
+    }
+    link_.decoder->feed(bytes, recv_mono_ns, out);
+  }
+  void finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& out) override {
+    if (link_.recorder) {
+      link_.recorder->finish(mono_ns, wall_ns, out);
+    } else {
+      link_.decoder->finish(mono_ns, out);
+    }
+  }
+
+ private:
+  Daemon& daemon_;
+  Link& link_;
+};
+
+// The daemon's own sink, first in line: each link's counts, a device restart said once, and the estimates into the
+// live run while recording.
+class Daemon::RecordingSink final : public pipeline::SessionSink {
+ public:
+  explicit RecordingSink(Daemon& daemon) : daemon_(daemon) {}
+  void on_sample(std::size_t index, const protocol::Sample& sample, std::span<const store::Estimate> estimates,
+                 std::int64_t) override {
+    Link& link = *daemon_.links_[index];
+    ++link.samples;
+    if (std::uint32_t& epoch = link.clock_epochs[sample.link_id]; sample.clock_epoch != epoch) {
+      epoch = sample.clock_epoch;
+      spdlog::warn("link '{}': the device restarted (its sequence number and clock went back); estimating from its "
+                   "new clock",
+                   link.config.name);
+    }
+    for (const store::Estimate& estimate : estimates) {
+      ++link.estimates;
+      daemon_.record([&](Recording& r) { r.store.append_estimate(r.run, estimate); });
+    }
+  }
+
+ private:
+  Daemon& daemon_;
 };
 
 Daemon::Daemon(Config config, std::optional<fs::path> config_file)
@@ -195,12 +254,15 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     });
   };
   // Bad parameters fail here, before any I/O.
-  estimation_ = std::make_unique<pipeline::EstimationStage>(params_, std::move(axes));
+  engine_ = std::make_unique<pipeline::SessionEngine>(
+      std::make_unique<pipeline::EstimationStage>(params_, std::move(axes)));
   outputs_ = std::make_unique<Outputs>(io_, config_.outputs);
   for (const LinkConfig& link_config : config_.links) {
     auto link = std::make_unique<Link>();
     Link& l = *link;
+    l.index = links_.size();
     l.config = link_config;
+    l.decoding = std::make_unique<LinkDecoding>(*this, l);
     l.store_link = static_cast<std::int64_t>(links_.size()) + 1;  // distinct until a recording assigns its own
     l.port = std::make_unique<SerialLink>(
         io_, link_config,
@@ -215,6 +277,16 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     if (link_config.feedback.enabled) l.feedback.emplace(link_config.format, link_config.feedback);
     links_.push_back(std::move(link));
   }
+  sinks_.push_back(std::make_unique<RecordingSink>(*this));
+  std::vector<LiveLink> live;
+  for (auto& link : links_) {
+    live.push_back({.name = link->config.name,
+                    .feedback = link->feedback ? &*link->feedback : nullptr,
+                    .bridge = link->bridge.get(),
+                    .write = [this, &l = *link](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); }});
+  }
+  for (auto& sink : make_live_sinks(*outputs_, live)) sinks_.push_back(std::move(sink));
+  for (auto& sink : sinks_) engine_->add_sink(*sink);
   if (auto problem = storage_problem()) {
     spdlog::error("not recording: {}", *problem);
     not_recording_ = NotRecording{.path = config_.store.path, .previous = "", .reason = *problem};
@@ -249,16 +321,16 @@ void Daemon::stop() {
 void Daemon::open_recording(const fs::path& path, const std::string& note) {
   auto r = std::make_unique<Recording>(path, config_.store);
   const std::int64_t wall = wall_now_ns();
-  nlohmann::json snapshot{{"imubridge_run", to_toml(config_)}};
-  std::vector<pipeline::RecordedLink> recorded;
+  std::vector<pipeline::SessionLink> links;
   std::string source = "imubridge run:";
   for (const auto& link : links_) {
-    recorded.push_back({link->config.name, link->config.format, link->config.calibration, link->config.axes});
-    source += fmt::format(" {} {} ({} @ {} baud);", link->config.name, describe(link->config.device),
-                          protocol::wire_format_name(link->config.format), link->config.baud);
+    const LinkConfig& c = link->config;
+    links.push_back({.recorded = {c.name, c.format, c.calibration, c.axes},
+                     .device = fmt::format("{} @ {} baud", describe(c.device), c.baud)});
+    source += fmt::format(" {} {} ({} @ {} baud);", c.name, describe(c.device), protocol::wire_format_name(c.format),
+                          c.baud);
   }
   source.pop_back();
-  pipeline::add_recorded_links(snapshot, recorded);
   // Sessions a killed or crashed daemon left open in this file: ended, as interrupted, before ours begins.
   for (const store::InterruptedSession& s : r->store.end_interrupted_sessions()) {
     spdlog::warn(
@@ -266,40 +338,26 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
         "stored time",
         s.session, path.string(), s.writer.pid);
   }
-  r->session =
-      r->store.begin_session({.kind = "live", .source = source, .config = snapshot.dump(), .started_wall_ns = wall});
-  std::vector<std::int64_t> ids;
-  std::vector<std::unique_ptr<pipeline::LinkRecorder>> recorders;
-  try {
-    if (!note.empty()) {
-      r->store.append_event(r->session, {.mono_ns = mono_now_ns(), .wall_ns = wall, .kind = "note", .detail = note});
-    }
-    for (const auto& link : links_) {
-      const LinkConfig& c = link->config;
-      ids.push_back(r->store.add_link(r->session, c.name, protocol::wire_format_name(c.format),
-                                      fmt::format("{} @ {} baud", describe(c.device), c.baud)));
-      recorders.push_back(
-          std::make_unique<pipeline::LinkRecorder>(r->store, r->session, ids.back(), c.name, c.format, c.calibration));
-    }
-    r->run = r->store.begin_run(
-        r->session, {.kind = "live", .params_json = nlohmann::json(params_).dump(), .created_wall_ns = wall});
-  } catch (const store::StoreError&) {
-    // A session that began is ended if the store still allows it: an open one would look recorded to the end.
-    recorders.clear();
-    try {
-      r->store.end_session(r->session, wall);
-    } catch (const store::StoreError&) {
-    }
-    throw;
-  }
+  pipeline::RecordedSession begun = pipeline::begin_recorded_session(
+      r->store,
+      {.kind = "live",
+       .source = source,
+       .config = {{"imubridge_run", to_toml(config_)}},
+       .started_wall_ns = wall,
+       .note = note,
+       .note_mono_ns = mono_now_ns(),
+       .estimated_with = params_},
+      links);
+  r->session = begun.id;
+  r->run = *begun.run;
   // Nothing below throws: every link switches to the new file, or (above) none does.
   for (std::size_t i = 0; i < links_.size(); ++i) {
     links_[i]->retire_decoder();
-    links_[i]->store_link = ids[i];
-    links_[i]->recorder = std::move(recorders[i]);
+    links_[i]->store_link = begun.store_links[i];
+    links_[i]->recorder = std::move(begun.recorders[i]);
   }
   // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
-  estimation_ = std::make_unique<pipeline::EstimationStage>(params_, *estimation_->axes());
+  engine_->replace_stage(std::make_unique<pipeline::EstimationStage>(params_, *engine_->stage().axes()));
   spdlog::info("recording session {} into {}{}{}", r->session, path.string(),
                config_.params ? " with parameters from " + config_.params->string()
                               : " (no parameters: velocity is not estimated)",
@@ -320,12 +378,11 @@ void Daemon::close_recording() {
       tail.clear();
       link->recorder->finish(mono, wall, tail);
       std::vector<store::Estimate> estimates;
-      for (const auto& sample : tail) estimation_->update(sample, estimates);
-      estimation_->finish(estimates);  // links still waiting for their axes
+      for (const auto& sample : tail) engine_->stage().update(sample, estimates);
+      engine_->stage().finish(estimates);  // links still waiting for their axes
       for (const auto& estimate : estimates) r->store.append_estimate(r->run, estimate);
     }
-    r->store.end_session(r->session, wall);
-    r->store.commit();
+    pipeline::end_recorded_session(r->store, r->session, wall);
     spdlog::info("session {} in {} ended", r->session, r->path.string());
   } catch (const store::StoreError& e) {
     spdlog::warn("session {} in {} could not be ended cleanly: {}", r->session, r->path.string(), e.what());
@@ -467,45 +524,8 @@ void Daemon::on_lost(Link& link, const std::string& reason) {
 }
 
 void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
-  const std::int64_t mono = mono_now_ns(), wall = wall_now_ns();
-  samples_.clear();
-  if (link.recorder) {
-    try {
-      link.recorder->on_chunk(bytes, mono, wall, samples_);
-    } catch (const store::StoreError& e) {
-      stop_recording(stopping_here(e.what()));
-      samples_.clear();
-      link.decoder->feed(bytes, mono, samples_);
-    }
-  } else {
-    link.decoder->feed(bytes, mono, samples_);
-  }
-  if (link.bridge) link.bridge->from_link(bytes);
-  process(link, mono);
+  engine_->on_chunk(link.index, *link.decoding, bytes, mono_now_ns(), wall_now_ns());
   record([&](Recording& r) { commits_ += r.store.commit_if_due(Clock::now()); });
-}
-
-void Daemon::process(Link& link, std::int64_t mono_ns) {
-  link.samples += samples_.size();
-  for (const protocol::Sample& sample : samples_) {
-    if (std::uint32_t& epoch = link.clock_epochs[sample.link_id]; sample.clock_epoch != epoch) {
-      epoch = sample.clock_epoch;
-      spdlog::warn("link '{}': the device restarted (its sequence number and clock went back); estimating from its "
-                   "new clock",
-                   link.config.name);
-    }
-    // Usually none or one; a link waiting for its IMU axes releases its first samples' estimates at once.
-    estimates_.clear();
-    estimation_->update(sample, estimates_);
-    for (const store::Estimate& estimate : estimates_) {
-      ++link.estimates;
-      record([&](Recording& r) { r.store.append_estimate(r.run, estimate); });
-      if (link.feedback) {
-        if (auto bytes = link.feedback->on_estimate(estimate, mono_ns)) write_to_link(link, *bytes);
-      }
-    }
-    outputs_->publish(link.config.name, sample, estimates_.empty() ? nullptr : &estimates_.back());
-  }
 }
 
 // Bytes for the vehicle (velocity feedback, a ground-control station's commands) are recorded as tx chunks.

@@ -1,7 +1,8 @@
 #pragma once
-// `imubridge run`: the ground-station daemon. One io_context thread serves every link: each chunk a port returns is
-// recorded (raw bytes, samples, losses: pipeline::LinkRecorder), estimated (pipeline::EstimationStage, into this
-// session's live run), forwarded to the link's bridge, and published on the outputs. Operations (signals, systemd,
+// `imubridge run`: the ground-station daemon. One io_context thread serves every link: each chunk a port returns goes
+// through the session engine (pipeline/session_engine.hpp), as replay's chunks do: recorded (raw bytes, samples,
+// losses: pipeline::LinkRecorder), estimated (into this session's live run), and handed to the sinks: the link's
+// bridge and feedback, and the outputs (daemon/live_sinks.hpp). Operations (signals, systemd,
 // storage limits, logs): docs/operations.md.
 #include <chrono>
 #include <filesystem>
@@ -19,7 +20,8 @@
 #include "store/records.hpp"
 
 namespace imubridge::pipeline {
-class EstimationStage;
+class SessionEngine;
+class SessionSink;
 }
 
 namespace imubridge::daemon {
@@ -50,6 +52,8 @@ class Daemon {
  private:
   struct Link;
   struct Recording;
+  class LinkDecoding;
+  class RecordingSink;
 
   // Why the daemon is not recording, and where it records again once it can.
   struct NotRecording {
@@ -79,7 +83,6 @@ class Daemon {
   void on_open(Link& link, const std::string& path, bool reopened);
   void on_lost(Link& link, const std::string& reason);
   void on_data(Link& link, std::span<const std::uint8_t> bytes);
-  void process(Link& link, std::int64_t mono_ns);
   void write_to_link(Link& link, std::span<const std::uint8_t> bytes);
   void use_decoders();
 
@@ -106,10 +109,9 @@ class Daemon {
   std::optional<NotRecording> not_recording_;  // while recording_ is null
   int failures_in_a_row_ = 0;                  // stops and failed resumes: they space the next resume
   std::chrono::steady_clock::time_point next_resume_{};
-  std::unique_ptr<pipeline::EstimationStage> estimation_;
+  std::unique_ptr<pipeline::SessionEngine> engine_;
+  std::vector<std::unique_ptr<pipeline::SessionSink>> sinks_;  // the engine's, in its order (RecordingSink first)
   std::vector<std::unique_ptr<Link>> links_;
-  std::vector<protocol::Sample> samples_;   // of the chunk being processed: reused, so a chunk allocates nothing
-  std::vector<store::Estimate> estimates_;  // of the sample being processed: reused likewise
   std::uint64_t commits_ = 0, rotations_ = 0;
   bool stopping_ = false;
 };

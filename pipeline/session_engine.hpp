@@ -62,7 +62,8 @@ class RecordAndDecode final : public ChunkDecoding {
 };
 
 // Something downstream of the engine. Each hook has a default that ignores it, so a sink overrides what it uses.
-// A sink must not throw: one failing sink must not stall the others (it records its own failure and goes on).
+// An exception from a sink reaches the engine's caller (replay stops on a store error). A live sink catches its own
+// failures instead, so that one failing sink never stalls the others or the recording.
 class SessionSink {
  public:
   virtual ~SessionSink() = default;

@@ -10,6 +10,7 @@
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/radio_link.hpp"
 #include "pipeline/session_config.hpp"
+#include "pipeline/session_engine.hpp"
 #include "replay/session_lookup.hpp"
 
 namespace imubridge::replay {
@@ -70,6 +71,50 @@ pipeline::StageAxes recorded_axes(const store::Store& store, const store::Sessio
   return axes;
 }
 
+// Replay's decoding: the recorded link's decoder, without the samples of radios the session never recorded (they
+// have no store link to be estimated under); those are counted.
+class RecordedLinksOnly final : public pipeline::ChunkDecoding {
+ public:
+  RecordedLinksOnly(pipeline::LinkDecoder& decoder, ReplayResult& result) : decoder_(decoder), result_(result) {}
+  void decode(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t,
+              std::vector<protocol::Sample>& out) override {
+    decoder_.feed(bytes, recv_mono_ns, out);
+    drop_unrecorded(out);
+  }
+  void finish(std::int64_t mono_ns, std::int64_t, std::vector<protocol::Sample>& out) override {
+    decoder_.finish(mono_ns, out);
+    drop_unrecorded(out);
+  }
+
+ private:
+  void drop_unrecorded(std::vector<protocol::Sample>& samples) {
+    result_.samples_without_link +=
+        std::erase_if(samples, [](const protocol::Sample& s) { return s.link_id == kNoLink; });
+  }
+  pipeline::LinkDecoder& decoder_;
+  ReplayResult& result_;
+};
+
+// Replay's one sink: the estimates, into the new run.
+class RunSink final : public pipeline::SessionSink {
+ public:
+  RunSink(store::Store& store, ReplayResult& result) : store_(store), result_(result) {}
+  void on_sample(std::size_t, const protocol::Sample&, std::span<const store::Estimate> estimates,
+                 std::int64_t) override {
+    ++result_.samples;
+    append(estimates);
+  }
+  void on_final_estimates(std::span<const store::Estimate> estimates) override { append(estimates); }
+
+ private:
+  void append(std::span<const store::Estimate> estimates) {
+    for (const store::Estimate& e : estimates) store_.append_estimate(result_.run, e);
+    result_.estimates += estimates.size();
+  }
+  store::Store& store_;
+  ReplayResult& result_;
+};
+
 }  // namespace
 
 estimator::ModelParams replay_params(const store::Store& store, std::int64_t session) {
@@ -83,26 +128,11 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
   const store::Session session = find_session(store, session_id);
   const estimator::ModelParams params = options.params ? *options.params : replay_params(store, session_id);
   auto decoders = make_decoders(store, session);
-  // The links' axes as recorded, so a replay rotates (and, for auto links, decides) exactly as the live run did.
-  pipeline::EstimationStage stage(params, recorded_axes(store, session));
-  std::vector<store::Estimate> estimates;
-
   ReplayResult result;
-  std::vector<protocol::Sample> samples;
-  const auto estimate = [&] {
-    for (const auto& sample : samples) {
-      if (sample.link_id == kNoLink) {
-        ++result.samples_without_link;
-        continue;
-      }
-      ++result.samples;
-      stage.update(sample, estimates);
-    }
-    samples.clear();
-    for (const store::Estimate& e : estimates) store.append_estimate(result.run, e);
-    result.estimates += estimates.size();
-    estimates.clear();
-  };
+  RunSink run(store, result);
+  // The links' axes as recorded, so a replay rotates (and, for auto links, decides) exactly as the live run did.
+  pipeline::SessionEngine engine(std::make_unique<pipeline::EstimationStage>(params, recorded_axes(store, session)));
+  engine.add_sink(run);
   play_chunks(store, session, options.play, [&](const store::Chunk& chunk, double t_s) {
     const auto it = decoders.find(chunk.link_id);
     if (it == decoders.end()) {
@@ -116,10 +146,11 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
       result.first_s = t_s;
     }
     ReplayedLink& link = it->second;
-    link.decoder.feed(chunk.bytes, chunk.recv_mono_ns, samples);
+    RecordedLinksOnly decoding(link.decoder, result);
+    engine.on_chunk(static_cast<std::size_t>(it->first), decoding, chunk.bytes, chunk.recv_mono_ns,
+                    chunk.recv_wall_ns);
     link.last_mono_ns = chunk.recv_mono_ns;
     link.fed = true;
-    estimate();
     ++result.chunks;
     result.bytes += chunk.bytes.size();
     result.last_s = t_s;
@@ -132,13 +163,11 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
   }
   for (auto& [id, link] : decoders) {
     if (!link.fed) continue;
-    link.decoder.finish(link.last_mono_ns, samples);  // as the recorder does at the end of its stream
-    estimate();
+    RecordedLinksOnly decoding(link.decoder, result);
+    engine.finish_link(static_cast<std::size_t>(id), decoding, link.last_mono_ns, link.last_mono_ns);
     for (const auto& [layer, counters] : link.decoder.counters()) result.counters[link.name] += counters;
   }
-  stage.finish(estimates);  // links still deciding their axes release their samples, as a live run's close does
-  for (const store::Estimate& e : estimates) store.append_estimate(result.run, e);
-  result.estimates += estimates.size();
+  engine.finish();  // links still deciding their axes release their samples, as a live run's close does
   store.commit();
   return result;
 }
