@@ -51,7 +51,7 @@ std::vector<PaperSample> paper_samples() {
     series.gyro.push_back(s.gyro);
     series.accel.push_back(s.accel);
   }
-  return prepare_paper_axis(series, PaperAxis::kPitch);
+  return prepare_paper_axis(series, PaperAxis::pitch);
 }
 
 void BM_PaperObjective(benchmark::State& state) {

@@ -26,7 +26,7 @@ const ImuSeries& series() {
 
 const std::vector<PaperSample>& pitch_samples() {
   static const std::vector<PaperSample> s =
-      prepare_paper(series(), PaperAxis::kPitch, VelocitySource::kReference, IdentifyOptions{}.derivative_half_window);
+      prepare_paper(series(), PaperAxis::pitch, VelocitySource::reference, IdentifyOptions{}.derivative_half_window);
   return s;
 }
 
@@ -34,12 +34,12 @@ const std::vector<PaperSample>& pitch_samples() {
 void BM_IdentifyPaper(benchmark::State& state, Method method) {
   IdentifyOptions o;
   o.method = method;
-  o.velocity = VelocitySource::kReference;
+  o.velocity = VelocitySource::reference;
   o.train = kTrain;
   for (auto _ : state) benchmark::DoNotOptimize(identify(series(), o));
 }
-BENCHMARK_CAPTURE(BM_IdentifyPaper, lm, Method::kLm)->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(BM_IdentifyPaper, ga, Method::kGa)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_IdentifyPaper, lm, Method::lm)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_IdentifyPaper, ga, Method::ga)->Unit(benchmark::kMillisecond);
 
 // One axis, the optimiser alone.
 void BM_PaperLm(benchmark::State& state) {
@@ -64,8 +64,8 @@ BENCHMARK(BM_PaperUncertainty)->Unit(benchmark::kMillisecond);
 
 void BM_PreparePaperAxis(benchmark::State& state) {
   for (auto _ : state) {
-    benchmark::DoNotOptimize(prepare_paper(series(), PaperAxis::kPitch, VelocitySource::kReference,
-                                           IdentifyOptions{}.derivative_half_window));
+    benchmark::DoNotOptimize(
+        prepare_paper(series(), PaperAxis::pitch, VelocitySource::reference, IdentifyOptions{}.derivative_half_window));
   }
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(series().size()));
 }
@@ -74,7 +74,7 @@ BENCHMARK(BM_PreparePaperAxis)->Unit(benchmark::kMillisecond);
 // The 3-D model by LM (12 free parameters, the bias's z held): far costlier per iteration and per sample.
 void BM_FullLm(benchmark::State& state) {
   static const std::vector<FullSample> samples =
-      prepare_full(series(), VelocitySource::kReference, IdentifyOptions{}.derivative_half_window);
+      prepare_full(series(), VelocitySource::reference, IdentifyOptions{}.derivative_half_window);
   const auto fit = select(samples, kTrain);
   for (auto _ : state) benchmark::DoNotOptimize(fit_full_lm(fit, FullModelParams{}));
 }

@@ -66,13 +66,13 @@ bool skip_without_flight(benchmark::State& state) {
 void Identify(benchmark::State& state, estimator::VelocitySource velocity, bool hold_bias) {
   if (skip_without_flight(state)) return;
   estimator::IdentifyOptions options;
-  options.model = estimator::ModelKind::kFull;
+  options.model = estimator::ModelKind::full;
   options.velocity = velocity;
   options.train = real_flight()->train;
   options.validate = real_flight()->validate;
-  options.hold.blocks[static_cast<int>(estimator::FullBlock::kAccelBias)] = hold_bias;
+  options.hold.blocks[static_cast<int>(estimator::FullBlock::accel_bias)] = hold_bias;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(velocity == estimator::VelocitySource::kFilter
+    benchmark::DoNotOptimize(velocity == estimator::VelocitySource::filter
                                  ? diagnose::identify_by_filter_error(real_flight()->series, options)
                                  : estimator::identify(real_flight()->series, options));
   }
@@ -81,7 +81,7 @@ void Identify(benchmark::State& state, estimator::VelocitySource velocity, bool 
 void Diagnose(benchmark::State& state, diagnose::VelocitySource velocity) {
   if (skip_without_flight(state)) return;
   diagnose::DiagnoseOptions options;
-  options.model = diagnose::BaseModel::kFull;
+  options.model = diagnose::ModelKind::full;
   options.velocity = velocity;
   options.train = real_flight()->train;
   options.validate = real_flight()->validate;
@@ -89,27 +89,27 @@ void Diagnose(benchmark::State& state, diagnose::VelocitySource velocity) {
   for (auto _ : state) benchmark::DoNotOptimize(diagnose::run_diagnosis(real_flight()->series, options));
 }
 
-BENCHMARK_CAPTURE(Identify, FullReferenceBiasHeld, estimator::VelocitySource::kReference, true)
+BENCHMARK_CAPTURE(Identify, FullReferenceBiasHeld, estimator::VelocitySource::reference, true)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
-BENCHMARK_CAPTURE(Identify, FullReference, estimator::VelocitySource::kReference, false)
+BENCHMARK_CAPTURE(Identify, FullReference, estimator::VelocitySource::reference, false)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
-BENCHMARK_CAPTURE(Identify, FullImuAloneBiasHeld, estimator::VelocitySource::kFilter, true)
+BENCHMARK_CAPTURE(Identify, FullImuAloneBiasHeld, estimator::VelocitySource::filter, true)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
-BENCHMARK_CAPTURE(Identify, FullImuAlone, estimator::VelocitySource::kFilter, false)
+BENCHMARK_CAPTURE(Identify, FullImuAlone, estimator::VelocitySource::filter, false)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);
-BENCHMARK_CAPTURE(Diagnose, FullReference, diagnose::VelocitySource::kReference)
+BENCHMARK_CAPTURE(Diagnose, FullReference, diagnose::VelocitySource::reference)
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
     ->Iterations(1);
-BENCHMARK_CAPTURE(Diagnose, FullImuAlone, diagnose::VelocitySource::kFilter)
+BENCHMARK_CAPTURE(Diagnose, FullImuAlone, diagnose::VelocitySource::filter)
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
     ->Iterations(1);

@@ -1,6 +1,6 @@
 #pragma once
-// What `imubridge diagnose` finds (docs/effects.md, docs/diagnose.md): the base model's fit, each effect the greedy
-// search added, the residual's analysis before and after, and what structure is left unexplained. Filled by
+// What `imubridge diagnose` finds (docs/effects.md, docs/residual-analysis.md): the base model's fit, each effect the
+// greedy search added, the residual's analysis before and after, and what structure is left unexplained. Filled by
 // diagnose::run_diagnosis(); written by write_report_json() and write_report_html(). Plain data, no behaviour.
 #include <cstddef>
 #include <optional>
@@ -86,7 +86,7 @@ struct CandidateTrial {
   std::string effect;
   double rmse_train = 0.0;
   double rmse_validation = 0.0;
-  double statistic = 0.0;  // the significance rule's statistic (docs/diagnose.md)
+  double statistic = 0.0;  // the significance rule's statistic (docs/effects.md, "The significance rule")
   double p_value = 1.0;
   bool significant = false;
   // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level) or the

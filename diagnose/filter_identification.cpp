@@ -67,10 +67,10 @@ estimator::FitReport report_of(const FitOutcome& fit, std::span<const std::size_
 
 estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& series,
                                                    const estimator::IdentifyOptions& options) {
-  if (options.velocity != estimator::VelocitySource::kFilter)
+  if (options.velocity != estimator::VelocitySource::filter)
     throw std::invalid_argument("identify_by_filter_error: the velocity source must be the filter");
-  const bool full = options.model == estimator::ModelKind::kFull;
-  if (options.hold.held(FullBlock::kLeverArm) || options.hold.held(FullBlock::kMounting))
+  const bool full = options.model == estimator::ModelKind::full;
+  if (options.hold.held(FullBlock::lever_arm) || options.hold.held(FullBlock::mounting))
     throw std::invalid_argument(
         "--hold lever_arm or mounting: from the IMU alone the base model's lever arm and mounting are always fitted");
 
@@ -81,16 +81,16 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
   diagnose_options.train = windows.train;
   diagnose_options.validate = windows.validate;
   ModelSetup setup;
-  setup.base = full ? BaseModel::kFull : BaseModel::kPaper;
+  setup.base = full ? ModelKind::full : ModelKind::paper;
   setup.signals = &signals;
   use_filter(setup, signals, diagnose_options);
 
   // identify's blocks beyond the base: the 3-D model's two drag laws and the horizontal bias (its z stays held).
   std::vector<const Effect*> effects;
   if (full) {
-    if (!options.hold.held(FullBlock::kDragLinear)) effects.push_back(find_effect("linear_drag"));
-    if (!options.hold.held(FullBlock::kDragQuadratic)) effects.push_back(find_effect("quadratic_drag"));
-    if (!options.hold.held(FullBlock::kAccelBias)) effects.push_back(find_effect("accel_bias"));
+    if (!options.hold.held(FullBlock::drag_linear)) effects.push_back(find_effect("linear_drag"));
+    if (!options.hold.held(FullBlock::drag_quadratic)) effects.push_back(find_effect("quadratic_drag"));
+    if (!options.hold.held(FullBlock::accel_bias)) effects.push_back(find_effect("accel_bias"));
   }
   const Model model(signals, setup, effects);
 
@@ -104,7 +104,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
     }
   }
   if (!drag.empty()) model.scan_drag_start(start, drag, train);
-  const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::kParameterPrecision);
+  const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::parameter_precision);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 
   estimator::IdentifyResult result;

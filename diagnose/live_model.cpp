@@ -29,7 +29,7 @@ std::vector<std::string> parameter_paths(const Model& model) {
   const ModelSetup& setup = model.setup();
   const std::vector<Parameter>& parameters = model.parameters();
   std::vector<std::string> paths(parameters.size());
-  if (setup.base == BaseModel::kFull) {
+  if (setup.base == ModelKind::full) {
     for (int i = 0; i < 3; ++i) {
       paths[i] = "full.lever_arm." + std::to_string(i);
       paths[3 + i] = "full.mounting." + std::to_string(i);
@@ -81,7 +81,7 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
   estimator::ModelParams out;
   estimator::FullModelParams& full = out.full;
 
-  if (setup.base == BaseModel::kFull) {
+  if (setup.base == ModelKind::full) {
     for (int i = 0; i < 3; ++i) {
       full.lever_arm[i] = p[i];
       full.mounting[i] = p[3 + i];
@@ -93,10 +93,10 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
     }
     full = estimator::full_from_paper(out.paper_x, out.paper_y);
   }
-  if (setup.velocity == VelocitySource::kFilter) out.identification.process_noise = model.process_noise(p);
+  if (setup.velocity == VelocitySource::filter) out.identification.process_noise = model.process_noise(p);
   // The full model's residual frame is the body's: a bias found there is R_bs^T b in IMU axes.
   const Eigen::Matrix3d imu_to_body =
-      setup.base == BaseModel::kFull ? rotation_matrix(full.mounting) : Eigen::Matrix3d::Identity();
+      setup.base == ModelKind::full ? rotation_matrix(full.mounting) : Eigen::Matrix3d::Identity();
 
   for (std::size_t e = 0; e < model.effects().size(); ++e) {
     const std::string name(model.effects()[e]->name());
@@ -127,7 +127,7 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
     if (name == "accel_bias") full.accel_bias += imu_to_body.transpose() * body_bias;
     // The world the wind was fitted in: the model's attitude at the first sample. The filter's heading starts at 0
     // there, which is the default.
-    if (name == "wind" && setup.velocity != VelocitySource::kFilter) {
+    if (name == "wind" && setup.velocity != VelocitySource::filter) {
       const ModelInputs inputs = model.inputs(p);
       if (!inputs.attitude.empty()) full.wind_heading = yaw_of(inputs.attitude.front());
     }
@@ -159,7 +159,7 @@ void record_fit(estimator::ModelParams& params, const Model& model, std::span<co
   ModelSetup whole_band = setup;
   whole_band.lowpass_hz = 0.0;
   const Model unfiltered(signals, whole_band, model.effects());
-  const std::string model_name = setup.base == BaseModel::kFull ? "full." : "paper.";
+  const std::string model_name = setup.base == ModelKind::full ? "full." : "paper.";
   for (const auto& [set, range] : {std::pair{"fit", train}, std::pair{"validation", validation}}) {
     const AxisValues residual = unfiltered.evaluate(p, range).residual();
     for (std::size_t i = 0; i < residual.size(); ++i) {

@@ -32,7 +32,7 @@ Eigen::Matrix3d rotation(const double* rotation_vector) {
 
 std::vector<Parameter> base_parameters(const ModelSetup& setup) {
   std::vector<Parameter> out;
-  if (setup.base == BaseModel::kPaper) {
+  if (setup.base == ModelKind::paper) {
     for (int axis : setup.axes) {
       const std::string a = axis_name(axis) + ".";
       out.push_back({a + "r", "m", 0.0, 0.0});
@@ -44,7 +44,7 @@ std::vector<Parameter> base_parameters(const ModelSetup& setup) {
     for (int i = 0; i < 3; ++i) out.push_back({"lever_arm." + std::to_string(i), "m"});
     for (int i = 0; i < 3; ++i) out.push_back({"mounting." + std::to_string(i), "rad"});
   }
-  if (setup.velocity == VelocitySource::kFilter) {
+  if (setup.velocity == VelocitySource::filter) {
     // The filter's process noise sets how fast its velocity follows the drag it measures; fitted with the model,
     // since a fixed wrong one biases the drag found (docs/identification.md). log10 of m/s^2/sqrt(Hz).
     out.push_back({std::string(Model::kProcessNoiseParameter), "log10(m/s^2/sqrt(Hz))",
@@ -148,7 +148,7 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
     : setup_(std::move(setup)), effects_(std::move(effects)) {
   setup_.signals = &signals;
   if (setup_.axes.empty()) throw std::invalid_argument("diagnose: no axis to diagnose");
-  if (setup_.velocity == VelocitySource::kReference && !signals.reference)
+  if (setup_.velocity == VelocitySource::reference && !signals.reference)
     throw std::invalid_argument("diagnose: velocity from the reference, but the session has no reference trajectory");
   parameters_ = base_parameters(setup_);
   base_size_ = parameters_.size();
@@ -171,10 +171,10 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
     // The filter runs the whole model: every parameter moves its velocity.
     input_parameter_.assign(parameters_.size(), true);
   }
-  if (setup_.base == BaseModel::kFull && setup_.velocity == VelocitySource::kImu) {
+  if (setup_.base == ModelKind::full && setup_.velocity == VelocitySource::eq12) {
     for (std::size_t i = 3; i < 6; ++i) input_parameter_[i] = true;
   }
-  if (setup_.base == BaseModel::kPaper && drag_in_dynamics) {
+  if (setup_.base == ModelKind::paper && drag_in_dynamics) {
     for (std::size_t i = 0; i < setup_.axes.size(); ++i) input_parameter_[kPaperParams * i + 3] = true;
   }
   for (std::size_t e = 0; e < effects_.size(); ++e) {
@@ -228,7 +228,7 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
 
   // 3. velocity: the drag law of the base model and the effects, the wind, and drag in the dynamics or not.
   DragLaw law;
-  if (setup_.base == BaseModel::kPaper) {
+  if (setup_.base == ModelKind::paper) {
     for (std::size_t i = 0; i < setup_.axes.size(); ++i) law.mu[setup_.axes[i]] = p[kPaperParams * i + 3];
   }
   Vector3d wind = Vector3d::Zero();
@@ -242,19 +242,19 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
   }
   in.thrust = measured_thrust ? s.thrust : std::vector<double>(n, kGravity);
 
-  if (setup_.velocity == VelocitySource::kFilter) {
+  if (setup_.velocity == VelocitySource::filter) {
     // Without drag the filter has nothing to fuse, and nothing in the model reads a velocity.
     in.velocity = filter_runs() ? filter_velocity(p, until) : std::vector<Vector3d>(n, Vector3d::Zero());
     return in;  // already the air velocity, in the filter's body axes
   }
-  if (setup_.velocity == VelocitySource::kReference) {
+  if (setup_.velocity == VelocitySource::reference) {
     in.velocity = s.reference->velocity_body;
     in.attitude = s.reference->attitude;
     if (tau != 0.0) {
       in.velocity = delayed(t, in.velocity, tau);
       in.attitude = delayed(t, in.attitude, tau);
     }
-  } else if (setup_.base == BaseModel::kPaper) {
+  } else if (setup_.base == ModelKind::paper) {
     // Eq. (11)-(12) per axis; the roll axis is the pitch model turned 90 deg about z_b (omega' = -omega_x).
     std::vector<double> pitch_rate(n), roll_rate(n);
     for (std::size_t k = 0; k < n; ++k) pitch_rate[k] = in.gyro[k].y(), roll_rate[k] = -in.gyro[k].x();
@@ -291,17 +291,17 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
 }
 
 double Model::process_noise(std::span<const double> p) const {
-  if (setup_.velocity != VelocitySource::kFilter) return setup_.filter.accel_process_noise;
+  if (setup_.velocity != VelocitySource::filter) return setup_.filter.accel_process_noise;
   return std::pow(10.0, p[base_size_ - 1]);
 }
 
 bool Model::inert(std::size_t i) const {
-  return setup_.velocity == VelocitySource::kFilter && !filter_runs() && i + 1 == base_size_;
+  return setup_.velocity == VelocitySource::filter && !filter_runs() && i + 1 == base_size_;
 }
 
 bool Model::filter_runs() const {
-  return setup_.velocity == VelocitySource::kFilter &&
-         (setup_.base == BaseModel::kPaper ||
+  return setup_.velocity == VelocitySource::filter &&
+         (setup_.base == ModelKind::paper ||
           std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->adds_drag(); }));
 }
 
@@ -363,7 +363,7 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   std::vector<Vector3d> predicted(range.count, Vector3d::Zero());
   PredictionContext ctx{setup_, in, {}, Eigen::Matrix3d::Identity(), range.first, range.count};
   estimator::FullModelParams full;
-  if (setup_.base == BaseModel::kPaper) {
+  if (setup_.base == ModelKind::paper) {
     for (std::size_t i = 0; i < axes; ++i) {
       const int axis = setup_.axes[i];
       const bool pitch = axis == 0;
@@ -410,8 +410,8 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   // the measurement is low-passed once per range, in IMU axes, and rotated after.
   const std::span<const Vector3d> compared = setup_.lowpass_hz > 0.0 ? lowpassed_measurement(range) : measured;
   for (std::size_t k = 0; k < range.count; ++k) {
-    const Vector3d m = setup_.base == BaseModel::kPaper ? compared[k] : Vector3d(ctx.imu_to_body * compared[k]);
-    const Vector3d f = setup_.base == BaseModel::kPaper ? predicted[k] : Vector3d(ctx.imu_to_body * predicted[k]);
+    const Vector3d m = setup_.base == ModelKind::paper ? compared[k] : Vector3d(ctx.imu_to_body * compared[k]);
+    const Vector3d f = setup_.base == ModelKind::paper ? predicted[k] : Vector3d(ctx.imu_to_body * predicted[k]);
     for (std::size_t i = 0; i < axes; ++i) {
       e.measured[i][k] = m[setup_.axes[i]];
       e.predicted[i][k] = f[setup_.axes[i]];
@@ -462,11 +462,11 @@ double Model::rmse(std::span<const double> p, Range range) const {
 std::vector<double> Model::base_start(Range range) const {
   std::vector<double> p(parameters_.size());
   for (std::size_t i = 0; i < p.size(); ++i) p[i] = parameters_[i].initial;
-  if (setup_.base == BaseModel::kFull) {
+  if (setup_.base == ModelKind::full) {
     for (int i = 0; i < 3; ++i) p[3 + i] = signals().level_mounting[i];
     return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
   }
-  if (setup_.velocity == VelocitySource::kFilter) {
+  if (setup_.velocity == VelocitySource::filter) {
     // The filter's velocity needs a drag to fuse: the paper's mu, from its decades, before the linear fit.
     std::vector<std::size_t> mu;
     for (std::size_t i = 0; i < setup_.axes.size(); ++i) mu.push_back(kPaperParams * i + 3);
@@ -491,7 +491,7 @@ std::vector<double> Model::base_start(Range range) const {
     try {
       start = estimator::paper_linear_fit(samples);
       // The filter fuses nothing without drag: keep the scanned one when the linear fit finds none.
-      if (setup_.velocity == VelocitySource::kFilter && !(start.mu > 0.0)) start.mu = p[kPaperParams * i + 3];
+      if (setup_.velocity == VelocitySource::filter && !(start.mu > 0.0)) start.mu = p[kPaperParams * i + 3];
     } catch (const std::invalid_argument&) {
       // Data that do not determine all four terms (no motion): LM starts from the precise installation.
     }
@@ -594,11 +594,10 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   RecordCost record(out.convergence);
   options.callbacks.push_back(&record);
   ceres::Solver::Summary summary;
-  if (stop == FitStop::kParameterPrecision) {
+  if (stop == FitStop::parameter_precision) {
     // A comparison low-passed at f_c leaves 2 f_c / f_s of the samples independent.
     const ModelSetup& setup = model.setup();
-    const double band =
-        setup.lowpass_hz > 0.0 ? std::min(1.0, 2.0 * setup.lowpass_hz / model.signals().rate_hz) : 1.0;
+    const double band = setup.lowpass_hz > 0.0 ? std::min(1.0, 2.0 * setup.lowpass_hz / model.signals().rate_hz) : 1.0;
     summary = estimator::solve_to_precision(problem, options, static_cast<double>(residual_count) * band);
   } else {
     ceres::Solve(options, &problem, &summary);

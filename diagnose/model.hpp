@@ -52,7 +52,7 @@ class Model {
   bool filter_runs() const;
   // True for a parameter nothing depends on: the filter's process noise while the filter has no drag to run with.
   bool inert(std::size_t i) const;
-  // kFilter: the filter's process noise at p (m/s^2/sqrt(Hz)), the base's last parameter; else the setup's.
+  // velocity `filter`: the filter's process noise at p (m/s^2/sqrt(Hz)), the base's last parameter; else the setup's.
   double process_noise(std::span<const double> p) const;
   static constexpr std::string_view kProcessNoiseParameter = "process_noise_log10";
   // Where effect i's parameters start in the full vector, and how many it has.
@@ -72,18 +72,19 @@ class Model {
   // force (Signals::level_mounting).
   std::vector<double> base_start(Range range) const;
 
-  // From the IMU alone (kFilter) the drag sets the filter velocity's time constant, and a fit started far from the
-  // right one settles in a basin of its own: sets parameters `indices` of `p` (all drag coefficients) to the one of
-  // kDragStarts with the lowest RMSE on `range`, the others held. One filter run per value.
+  // From the IMU alone (velocity `filter`) the drag sets the filter velocity's time constant, and a fit started far
+  // from the right one settles in a basin of its own: sets parameters `indices` of `p` (all drag coefficients) to the
+  // one of kDragStarts with the lowest RMSE on `range`, the others held. One filter run per value.
   void scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range) const;
   // Decades spanning multirotors' drag, linear (1/s) and quadratic (1/m) alike.
   static constexpr double kDragStarts[] = {0.01, 0.03, 0.1, 0.3, 1.0, 3.0};
 
  private:
-  // Stages 1-3 for samples [0, until) (kFilter runs its filter only that far; the other sources fill everything).
+  // Stages 1-3 for samples [0, until) (velocity `filter` runs its filter only that far; the other sources fill
+  // everything).
   ModelInputs compute_inputs(std::span<const double> p, std::size_t until) const;
-  // kFilter: the drag-velocity filter run with the model at p from the series' first sample to `until`, on block
-  // means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation).
+  // velocity `filter`: the drag-velocity filter run with the model at p from the series' first sample to `until`, on
+  // block means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation).
   std::vector<Eigen::Vector3d> filter_velocity(std::span<const double> p, std::size_t until) const;
   // The inputs for p, recomputed only when a parameter they depend on changed: most of a numeric Jacobian's
   // evaluations perturb parameters that act after stage 3. Not thread-safe (the fit is single-threaded).
@@ -118,11 +119,11 @@ struct FitOutcome {
 // How far LM goes: until a relative cost change of 1e-7, as diagnose needs to compare candidates by the costs they
 // reach (the F-test), or until the parameters are within a third of a standard error of the optimum
 // (estimator/precise_solve.hpp), which is all a fit that reports parameters can tell (identify).
-enum class FitStop { kCost, kParameterPrecision };
+enum class FitStop { cost, parameter_precision };
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
 // ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does.
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50,
-               FitStop stop = FitStop::kCost);
+               FitStop stop = FitStop::cost);
 
 }  // namespace imubridge::diagnose

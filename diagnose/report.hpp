@@ -15,7 +15,7 @@ namespace imubridge::diagnose {
 // JSON so that it stays small.
 inline constexpr std::size_t kReportTopEntries = 5;
 
-// Every field of the Diagnosis, with the names at the top level: "base", "steps", "final",
+// Every field of the Diagnosis, with the loop's outcome at the top level: "base", "steps", "final",
 // "residual_white", "unexplained", plus "session", "model", "axes", "velocity_source", "train_window",
 // "validation_window", "significance_rule", "last_candidates", "series". A residual analysis appears as a summary
 // (rms, mean, Ljung-Box, top peaks and correlations, trend); numbers that are not finite (a standard error the

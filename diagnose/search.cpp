@@ -211,13 +211,13 @@ double effective_samples(std::span<const double> x, std::size_t max_lag) {
   return std::clamp(n / (1.0 + 2.0 * sum), 1.0, n);
 }
 
-std::string_view name(VelocitySource velocity) {
+std::string_view diagnose_spelling(VelocitySource velocity) {
   switch (velocity) {
-    case VelocitySource::kReference:
+    case VelocitySource::reference:
       return "reference";
-    case VelocitySource::kImu:
+    case VelocitySource::eq12:
       return "imu";
-    case VelocitySource::kFilter:
+    case VelocitySource::filter:
       return "filter";
   }
   return "?";
@@ -249,7 +249,7 @@ estimator::DragVelocityConfig filter_config(const Signals& signals, const Diagno
 }
 
 double use_filter(ModelSetup& setup, const Signals& signals, const DiagnoseOptions& options) {
-  setup.velocity = VelocitySource::kFilter;
+  setup.velocity = VelocitySource::filter;
   setup.filter = filter_config(signals, options);
   setup.filter_block = identification_block(signals.rate_hz);
   const double nyquist = 0.5 * signals.rate_hz / static_cast<double>(setup.filter_block);
@@ -264,8 +264,8 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   const Signals signals = prepare_signals(series);
   ModelSetup setup;
   setup.base = options.model;
-  setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::kReference : VelocitySource::kFilter);
-  if (setup.velocity == VelocitySource::kFilter) options.lowpass_hz = use_filter(setup, signals, options);
+  setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::reference : VelocitySource::filter);
+  if (setup.velocity == VelocitySource::filter) options.lowpass_hz = use_filter(setup, signals, options);
   if (options.lowpass_hz != 0.0) {
     // Above the band limit the residual holds nothing to fit and no line to report.
     options.ignore_bands.emplace_back(options.lowpass_hz, std::numeric_limits<double>::infinity());
@@ -286,13 +286,13 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
 
   Diagnosis out;
   out.session = options.session;
-  out.model = options.model == BaseModel::kPaper ? "paper" : "full";
+  out.model = options.model == ModelKind::paper ? "paper" : "full";
   for (int axis : setup.axes) out.axes.push_back(axis_name(axis));
-  out.velocity_source = std::string(name(setup.velocity));
+  out.velocity_source = std::string(diagnose_spelling(setup.velocity));
   out.train_start = windows.train.start, out.train_end = windows.train.end;
   out.validate_start = windows.validate.start, out.validate_end = windows.validate.end;
   out.significance_rule = describe_rule(options);
-  if (setup.velocity == VelocitySource::kImu) {
+  if (setup.velocity == VelocitySource::eq12) {
     if (auto drift = estimator::eq12_drift_warning(series, signals.level_mounting, windows.train))
       out.warnings.push_back(std::move(*drift));
   }
@@ -327,7 +327,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   for (int step = 0; step < options.max_steps; ++step) {
     const std::vector<std::string> in_model = names_of(current.effects);
     // Only judged when the attitude comes from the gyro, and only if the current model's attitude is a flight's.
-    const bool judge_tilt = setup.velocity == VelocitySource::kImu &&
+    const bool judge_tilt = setup.velocity == VelocitySource::eq12 &&
                             largest_tilt(Model(signals, setup, current.effects), current.fit.values, train,
                                          validation) <= kMaxFlightTiltRad;
     // One candidate: the current model plus `effect`, fitted on the training window and tested on the validation
@@ -361,7 +361,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
             trial.skipped = *why;
             return {trial, std::nullopt};
           }
-          if (setup.velocity == VelocitySource::kFilter && effects[e]->adds_drag()) {
+          if (setup.velocity == VelocitySource::filter && effects[e]->adds_drag()) {
             for (std::size_t i = 0; i < model.effect_size(e); ++i) drag.push_back(model.effect_offset(e) + i);
           }
         }

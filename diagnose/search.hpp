@@ -32,7 +32,7 @@ struct DiagnoseProgress {
 };
 
 struct DiagnoseOptions {
-  BaseModel model = BaseModel::kPaper;
+  ModelKind model = ModelKind::paper;
   std::optional<VelocitySource> velocity;         // default: the reference when the series has one, else the filter
   std::vector<int> axes{0, 1};                    // 0 = x, 1 = y
   std::optional<estimator::TimeWindow> train;     // default [0, 33) s, the paper's split
@@ -54,18 +54,18 @@ struct DiagnoseOptions {
   std::function<void(const DiagnoseProgress&)> progress;
 };
 
-// "reference", "imu", "filter": the spellings of --velocity.
-std::string_view name(VelocitySource velocity);
+// "reference", "imu", "filter": the spellings of diagnose's --velocity (identify spells eq. (12)'s velocity "eq12").
+std::string_view diagnose_spelling(VelocitySource velocity);
 
 // A multirotor's manoeuvres (attitude changes and the velocity they drive) stay below this; the measurement noise of
 // the filter error method is what lies above it (docs/identification.md).
 inline constexpr double kManoeuvreBandHz = 5.0;
-// The filter that gives the velocity from the IMU alone (VelocitySource::kFilter): the defaults, with the
+// The filter that gives the velocity from the IMU alone (velocity `filter`): the defaults, with the
 // measurement noise set from the data: the RMS of its block means' levelled horizontal specific force above
 // kManoeuvreBandHz over the training window, when larger than the default.
 estimator::DragVelocityConfig filter_config(const Signals& signals, const DiagnoseOptions& options);
 
-// Makes `setup` take its velocity from the filter (VelocitySource::kFilter): its noises (filter_config), its blocks
+// Makes `setup` take its velocity from the filter (velocity `filter`): its noises (filter_config), its blocks
 // (identification_block), and the band the model is compared in: the blocks' Nyquist frequency, or the requested
 // --lowpass when lower. Above it the filter sees nothing, and the vibration there would only bury the innovations
 // the fit is about. Returns that band limit, Hz.

@@ -46,7 +46,7 @@ Eigen::Matrix3d rotation_matrix(const Eigen::Vector3d& rotation_vector);
 // R_bs of the levelled body frame: rotation_matrix(signals.level_mounting).
 inline Eigen::Matrix3d level_rotation(const Signals& signals) { return rotation_matrix(signals.level_mounting); }
 
-// The filter error method (VelocitySource::kFilter) identifies in the manoeuvres' band, below about 5 Hz: its filter
+// The filter error method (velocity `filter`) identifies in the manoeuvres' band, below about 5 Hz: its filter
 // runs on block means at about five times that. The blocks average the vibration out, so what the filter is told is
 // noise is close to white, and its one-step prediction spans 40 ms, so a filter that merely follows the measurement
 // predicts no better than the model (docs/identification.md, "From the IMU alone").

@@ -19,31 +19,6 @@ namespace {
 
 constexpr double kDegree = kPi / 180.0;
 
-template <typename Enum, std::size_t N>
-Enum parse(std::string_view text, const std::array<std::pair<std::string_view, Enum>, N>& names, const char* what) {
-  std::string valid;
-  for (const auto& [spelling, value] : names) {
-    if (text == spelling) return value;
-    valid += (valid.empty() ? "" : ", ") + std::string(spelling);
-  }
-  throw std::invalid_argument("unknown " + std::string(what) + " \"" + std::string(text) + "\" (valid: " + valid + ")");
-}
-
-constexpr std::array<std::pair<std::string_view, ModelKind>, 2> kModels{
-    {{"paper", ModelKind::kPaper}, {"full", ModelKind::kFull}}};
-constexpr std::array<std::pair<std::string_view, Method>, 3> kMethods{
-    {{"ga", Method::kGa}, {"lm", Method::kLm}, {"ga+lm", Method::kGaLm}}};
-constexpr std::array<std::pair<std::string_view, VelocitySource>, 3> kVelocities{
-    {{"eq12", VelocitySource::kEq12}, {"reference", VelocitySource::kReference}, {"filter", VelocitySource::kFilter}}};
-
-template <typename Enum, std::size_t N>
-std::string_view spelling(Enum value, const std::array<std::pair<std::string_view, Enum>, N>& names) {
-  for (const auto& [text, v] : names) {
-    if (v == value) return text;
-  }
-  return "?";
-}
-
 double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -132,7 +107,7 @@ FitReport identify_paper_axis(const std::vector<PaperSample>& samples, const Win
   const std::span<const PaperSample> validation = select(samples, w.validate);
   FitReport report{.name = name, .fit_samples = fit.size(), .validation_samples = validation.size()};
   const auto start = std::chrono::steady_clock::now();
-  if (o.method != Method::kLm) {
+  if (o.method != Method::lm) {
     const GaResult ga = minimize_ga(
         [fit](std::span<const double> g) {
           return objective({g[0], g[1], g[2], g[3]}, fit);
@@ -141,8 +116,8 @@ FitReport identify_paper_axis(const std::vector<PaperSample>& samples, const Win
     p = {ga.best[0], ga.best[1], ga.best[2], ga.best[3]};
     report.convergence = ga.convergence;
   }
-  if (o.method != Method::kGa) {
-    const PaperFit lm = fit_paper_lm(fit, o.method == Method::kLm ? paper_linear_fit(fit) : p);
+  if (o.method != Method::ga) {
+    const PaperFit lm = fit_paper_lm(fit, o.method == Method::lm ? paper_linear_fit(fit) : p);
     p = lm.params;
     p.beta = wrap_angle(p.beta);
     report.lm = lm.report;
@@ -171,7 +146,7 @@ std::vector<Gene> full_genes(const FullHold& hold) {
   for (int b = 0; b < kFullBlocks; ++b) {
     if (hold.blocks[b]) continue;
     // The bias's z is held (least_squares.hpp).
-    const int size = static_cast<FullBlock>(b) == FullBlock::kAccelBias ? 2 : kFullBlockSizes[b];
+    const int size = static_cast<FullBlock>(b) == FullBlock::accel_bias ? 2 : kFullBlockSizes[b];
     for (int i = 0; i < size; ++i) genes.push_back({b, i, kBox[b].first, kBox[b].second});
   }
   return genes;
@@ -190,7 +165,7 @@ FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w
   FitReport report{.name = "full", .fit_samples = fit.size(), .validation_samples = validation.size()};
   const auto start = std::chrono::steady_clock::now();
   p = FullModelParams{};  // LM starts with the IMU at the mass centre, aligned, no drag, no bias
-  if (o.method != Method::kLm) {
+  if (o.method != Method::lm) {
     const std::vector<Gene> genes = full_genes(o.hold);
     GaBounds bounds;
     for (const Gene& gene : genes) {
@@ -202,7 +177,7 @@ FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w
     p = from_genes(ga.best, genes, p);
     report.convergence = ga.convergence;
   }
-  if (o.method != Method::kGa) {
+  if (o.method != Method::ga) {
     const FullFit lm = fit_full_lm(fit, p, o.hold);
     p = lm.params;
     report.lm = lm.report;
@@ -220,13 +195,6 @@ FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w
 }
 
 }  // namespace
-
-std::string_view name(ModelKind model) { return spelling(model, kModels); }
-std::string_view name(Method method) { return spelling(method, kMethods); }
-std::string_view name(VelocitySource velocity) { return spelling(velocity, kVelocities); }
-ModelKind parse_model(std::string_view text) { return parse(text, kModels, "model"); }
-Method parse_method(std::string_view text) { return parse(text, kMethods, "method"); }
-VelocitySource parse_velocity(std::string_view text) { return parse(text, kVelocities, "velocity source"); }
 
 TimeWindow data_span(std::span<const double> t) {
   if (t.empty()) throw std::invalid_argument("no samples");
@@ -289,10 +257,10 @@ std::vector<PaperSample> prepare_paper(const ImuSeries& series, PaperAxis axis, 
   for (std::size_t k = 0; k < samples.size(); ++k) omega[k][0] = samples[k].omega;
   const auto omega_dot = cubic_slope<Eigen::Matrix<double, 1, 1>>(t, omega, half_window);
   for (std::size_t k = 0; k < samples.size(); ++k) samples[k].omega_dot = omega_dot[k][0];
-  if (velocity == VelocitySource::kReference) {
+  if (velocity == VelocitySource::reference) {
     require_reference(series, "velocity from the reference");
     // The axis's x' is x_b for pitch and y_b for roll; the paper's v is minus the velocity along it.
-    const int along = axis == PaperAxis::kPitch ? 0 : 1;
+    const int along = axis == PaperAxis::pitch ? 0 : 1;
     const std::vector<Eigen::Vector3d> v_body = reference_body_velocity(series);
     for (std::size_t k = 0; k < samples.size(); ++k) samples[k].v = -v_body[k][along];
   }
@@ -303,7 +271,7 @@ std::vector<FullSample> prepare_full(const ImuSeries& series, VelocitySource vel
   require_valid(series);
   const std::vector<Eigen::Vector3d> gyro_rate = smoothed_derivative(series.t, series.gyro, half_window);
   std::vector<Eigen::Vector3d> v_body;
-  if (velocity == VelocitySource::kReference) {
+  if (velocity == VelocitySource::reference) {
     require_reference(series, "velocity from the reference");
     v_body = reference_body_velocity(series);
   } else {
@@ -365,21 +333,21 @@ std::optional<std::string> eq12_drift_warning(const ImuSeries& series, const Eig
 
 IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
   require_valid(series);
-  if (o.velocity == VelocitySource::kReference) require_reference(series, "velocity from the reference");
-  if (o.velocity == VelocitySource::kFilter)
+  if (o.velocity == VelocitySource::reference) require_reference(series, "velocity from the reference");
+  if (o.velocity == VelocitySource::filter)
     throw std::invalid_argument("identify: the filter's velocity is fitted by diagnose::identify_by_filter_error");
-  if (o.model == ModelKind::kFull && std::all_of(o.hold.blocks.begin(), o.hold.blocks.end(), [](bool h) { return h; }))
+  if (o.model == ModelKind::full && std::all_of(o.hold.blocks.begin(), o.hold.blocks.end(), [](bool h) { return h; }))
     throw std::invalid_argument("every block of the 3-D model is held: nothing to identify");
   const Windows windows = resolve_windows(series.t, o.train, o.validate);
   IdentifyResult result;
   Identification& id = result.params.identification;
   id.method = name(o.method);
-  id.seed = o.method == Method::kLm ? 0 : o.ga.seed;
+  id.seed = o.method == Method::lm ? 0 : o.ga.seed;
   id.fit_windows = {windows.train};
   id.validation_windows = {windows.validate};
-  if (o.model == ModelKind::kPaper) {
-    for (const PaperAxis axis : {PaperAxis::kPitch, PaperAxis::kRoll}) {
-      const bool pitch = axis == PaperAxis::kPitch;
+  if (o.model == ModelKind::paper) {
+    for (const PaperAxis axis : {PaperAxis::pitch, PaperAxis::roll}) {
+      const bool pitch = axis == PaperAxis::pitch;
       PaperAxisParams& p = pitch ? result.params.paper_x : result.params.paper_y;
       const auto samples = prepare_paper(series, axis, o.velocity, o.derivative_half_window);
       result.fits.push_back(identify_paper_axis(samples, windows, o, pitch ? "paper.x" : "paper.y", p, id));

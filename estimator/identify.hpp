@@ -15,6 +15,7 @@
 #include "estimator/cost_functors.hpp"
 #include "estimator/drag_velocity.hpp"
 #include "estimator/ga.hpp"
+#include "estimator/identify_choices.hpp"
 #include "estimator/imu_series.hpp"
 #include "estimator/least_squares.hpp"
 #include "estimator/paper_model.hpp"
@@ -22,27 +23,13 @@
 
 namespace imubridge::estimator {
 
-enum class ModelKind { kPaper, kFull };  // "paper": eq. (14) per axis; "full": the 3-D model
-enum class Method { kGa, kLm, kGaLm };   // "ga", "lm", "ga+lm"
-// "eq12": eq. (12) (3-D: dead_reckon); "reference"; "filter": the drag-velocity filter running the model, fitted by
-// the filter error method (diagnose/filter_identification.hpp: it needs diagnose's model, so identify() refuses it).
-enum class VelocitySource { kEq12, kReference, kFilter };
-
-std::string_view name(ModelKind model);
-std::string_view name(Method method);
-std::string_view name(VelocitySource velocity);
-// Throw std::invalid_argument naming the valid spellings.
-ModelKind parse_model(std::string_view text);
-Method parse_method(std::string_view text);
-VelocitySource parse_velocity(std::string_view text);
-
 // The paper's split: the first 33 s identify, the rest validate (section VII).
 inline constexpr double kPaperTrainSeconds = 33.0;
 
 struct IdentifyOptions {
-  ModelKind model = ModelKind::kPaper;
-  Method method = Method::kLm;
-  VelocitySource velocity = VelocitySource::kEq12;
+  ModelKind model = ModelKind::paper;
+  Method method = Method::lm;
+  VelocitySource velocity = VelocitySource::eq12;
   std::optional<TimeWindow> train;     // default [0, 33) s
   std::optional<TimeWindow> validate;  // default from the end of `train` to the end of the data
   GaOptions ga;

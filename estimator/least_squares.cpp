@@ -138,9 +138,9 @@ std::vector<Block> add_full_residuals(ceres::Problem& problem, std::span<const F
     const auto which = static_cast<FullBlock>(b);
     if (hold.blocks[b]) {
       problem.SetParameterBlockConstant(data[b]);
-    } else if (which == FullBlock::kDragLinear || which == FullBlock::kDragQuadratic) {
+    } else if (which == FullBlock::drag_linear || which == FullBlock::drag_quadratic) {
       for (int i = 0; i < kFullBlockSizes[b]; ++i) problem.SetParameterLowerBound(data[b], i, 0.0);
-    } else if (which == FullBlock::kAccelBias) {
+    } else if (which == FullBlock::accel_bias) {
       problem.SetManifold(data[b], new ceres::SubsetManifold(3, {kBiasZ}));
       block.free[kBiasZ] = false;
     }

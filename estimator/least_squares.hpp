@@ -51,7 +51,7 @@ Uncertainty paper_uncertainty(std::span<const PaperSample> samples, const PaperA
 
 // ---- The 3-D model: FullModelParams' five blocks ----
 
-enum class FullBlock { kLeverArm, kMounting, kDragLinear, kDragQuadratic, kAccelBias };
+enum class FullBlock { lever_arm, mounting, drag_linear, drag_quadratic, accel_bias };
 inline constexpr int kFullBlocks = 5;
 inline constexpr std::array<int, kFullBlocks> kFullBlockSizes{3, 3, 2, 2, 3};
 // As in PARAMS.json.

@@ -17,7 +17,7 @@ std::vector<PaperSample> prepare_paper_axis(const ImuSeries& series, PaperAxis a
   const std::size_t n = series.size();
   const std::vector<Eigen::Vector3d> gyro_rate = central_difference(series.t, series.gyro);
   // The roll axis is the pitch model in a body frame turned +90 deg about z_b: omega' = -omega_x, f' = f_y.
-  const bool pitch = axis == PaperAxis::kPitch;
+  const bool pitch = axis == PaperAxis::pitch;
   std::vector<double> omega(n);
   for (std::size_t k = 0; k < n; ++k) omega[k] = pitch ? series.gyro[k].y() : -series.gyro[k].x();
   const PitchIntegration integrated = integrate_pitch(series.t, omega);

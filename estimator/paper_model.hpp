@@ -65,7 +65,7 @@ T paper_specific_force(const PaperCoefficients<T>& c, const PaperSample& s) {
          c.mu * (std::abs(s.v) * s.v);
 }
 
-enum class PaperAxis { kPitch, kRoll };
+enum class PaperAxis { pitch, roll };
 
 // One axis's signals from an IMU series: theta and v by eq. (11)-(12) (trapezoidal rule, theta0 = v0 = 0) and
 // omega_dot by the central difference (offline, no delay). Throws std::invalid_argument for an invalid series.

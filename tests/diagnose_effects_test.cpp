@@ -56,15 +56,16 @@ void fill_paper_accel(Signals& s, double mu = 0.04) {
   const auto c = estimator::paper_coefficients(p);
   for (std::size_t k = 0; k < s.size(); ++k) {
     const Vector3d& v = s.reference->velocity_body[k];
-    s.accel[k].x() = estimator::paper_specific_force(
-        c, {.omega = s.gyro[k].y(), .omega_dot = s.gyro_rate[k].y(), .v = -v.x()});
-    s.accel[k].y() = estimator::paper_specific_force(
-        c, {.omega = -s.gyro[k].x(), .omega_dot = -s.gyro_rate[k].x(), .v = -v.y()});
+    s.accel[k].x() =
+        estimator::paper_specific_force(c, {.omega = s.gyro[k].y(), .omega_dot = s.gyro_rate[k].y(), .v = -v.x()});
+    s.accel[k].y() =
+        estimator::paper_specific_force(c, {.omega = -s.gyro[k].x(), .omega_dot = -s.gyro_rate[k].x(), .v = -v.y()});
   }
 }
 
 // Fits `effects` on top of the paper model from the base's closed-form start and the effects' defaults.
-FitOutcome fit_with(const Signals& s, const std::vector<const Effect*>& effects, std::vector<double> effect_start = {}) {
+FitOutcome fit_with(const Signals& s, const std::vector<const Effect*>& effects,
+                    std::vector<double> effect_start = {}) {
   const Model base(s, paper_setup(s));
   const Range all{0, s.size()};
   const Model model(s, paper_setup(s), effects);
@@ -123,7 +124,7 @@ TEST(Effects, DragEffectsAddTheirCoefficientsPerDiagnosedAxis) {
   effect("linear_drag").add_drag(std::vector<double>{0.5}, paper_setup(s, {1}), law);
   EXPECT_EQ(law.k, Eigen::Vector2d(0.0, 0.5));
   ModelSetup full = paper_setup(s);
-  full.base = BaseModel::kFull;
+  full.base = ModelKind::full;
   effect("quadratic_drag").add_drag(std::vector<double>{0.1, 0.2}, full, law);
   EXPECT_EQ(law.mu, Eigen::Vector2d(0.1, 0.2));
   EXPECT_TRUE(effect("quadratic_drag").why_not(paper_setup(s), {}).has_value());  // eq. (14) has mu
@@ -137,7 +138,7 @@ TEST(Effects, GyroBiasIsTakenOffTheAxesTheModelUses) {
   effect("gyro_bias").adjust_gyro(std::vector<double>{0.25}, paper_setup(s, {0}), gyro);
   EXPECT_EQ(gyro[0], Vector3d(1.0, 1.75, 3.0));
   ModelSetup full = paper_setup(s);
-  full.base = BaseModel::kFull;
+  full.base = ModelKind::full;
   effect("gyro_bias").adjust_gyro(std::vector<double>{0.1, 0.2, 0.3}, full, gyro);
   EXPECT_TRUE(gyro[0].isApprox(Vector3d(0.9, 1.55, 2.7)));
 }
@@ -187,8 +188,8 @@ TEST(Effects, AdditiveTermsGoOntoThePrediction) {
 TEST(Effects, StageFlagsAndApplicability) {
   const Signals s = synthetic_signals(1.0);
   ModelSetup reference = paper_setup(s), imu = paper_setup(s), full = paper_setup(s);
-  imu.velocity = VelocitySource::kImu;
-  full.base = BaseModel::kFull;
+  imu.velocity = VelocitySource::eq12;
+  full.base = ModelKind::full;
   EXPECT_DOUBLE_EQ(effect("time_offset").time_offset(std::vector<double>{0.02}), 0.02);
   EXPECT_EQ(effect("wind").wind_ned(std::vector<double>{3.0, -1.0}), Vector3d(3.0, -1.0, 0.0));
   EXPECT_TRUE(effect("thrust").stages().measured_thrust);
@@ -198,7 +199,7 @@ TEST(Effects, StageFlagsAndApplicability) {
   EXPECT_FALSE(effect("self_consistent_velocity").why_not(imu, {}).has_value());
   // The full model has no drag until one is added: no wind, no self-consistent velocity before.
   ModelSetup full_imu = full;
-  full_imu.velocity = VelocitySource::kImu;
+  full_imu.velocity = VelocitySource::eq12;
   EXPECT_TRUE(effect("wind").why_not(full, {}).has_value());
   const std::vector<std::string> with_drag{"quadratic_drag"};
   EXPECT_FALSE(effect("wind").why_not(full, with_drag).has_value());
@@ -241,8 +242,8 @@ TEST(Model, TheBaseModelReproducesEq14) {
 TEST(Model, FitRecoversLinearDrag) {
   Signals s = synthetic_signals();
   fill_paper_accel(s);
-  for (std::size_t k = 0; k < s.size(); ++k) s.accel[k].head<2>() -= Eigen::Vector2d(0.6, 0.3).cwiseProduct(
-                                                   s.reference->velocity_body[k].head<2>());
+  for (std::size_t k = 0; k < s.size(); ++k)
+    s.accel[k].head<2>() -= Eigen::Vector2d(0.6, 0.3).cwiseProduct(s.reference->velocity_body[k].head<2>());
   const FitOutcome f = fit_with(s, {&effect("linear_drag")});
   EXPECT_NEAR(f.values[8], 0.6, 1e-6);
   EXPECT_NEAR(f.values[9], 0.3, 1e-6);
@@ -304,7 +305,7 @@ TEST(Model, RefusesWhatCannotApply) {
   const Signals s = prepare_signals(series);
   EXPECT_THROW(Model(s, paper_setup(s)), std::invalid_argument);  // reference velocity without a reference
   ModelSetup imu = paper_setup(s);
-  imu.velocity = VelocitySource::kImu;
+  imu.velocity = VelocitySource::eq12;
   EXPECT_NO_THROW(Model(s, imu));
   EXPECT_THROW(Model(s, imu, {&effect("quadratic_drag")}), std::invalid_argument);
   imu.axes.clear();

@@ -26,7 +26,7 @@ const estimator::TimeWindow kTrain{0.0, 30.0}, kValidate{30.0, 50.0};
 
 struct Flight {
   std::vector<std::string> sim_effects{};
-  BaseModel model = BaseModel::kFull;
+  ModelKind model = ModelKind::full;
   std::string scenario = "paper";
   int max_steps = 2;
 };
@@ -68,7 +68,7 @@ const Diagnosis& control(const std::string& which) {
   static std::map<std::string, Diagnosis> done;
   if (!done.contains(which)) {
     if (which == "full") done[which] = diagnose({.sim_effects = {"quadratic_drag=0"}});
-    if (which == "agile") done[which] = diagnose({.model = BaseModel::kPaper, .scenario = "agile"});
+    if (which == "agile") done[which] = diagnose({.model = ModelKind::paper, .scenario = "agile"});
     if (which == "agile, full") done[which] = diagnose({.scenario = "agile"});
   }
   return done.at(which);
@@ -113,7 +113,7 @@ TEST(FromTheImuAlone, QuadraticDrag) {
 
 // A sensor tilted about y reads the thrust's variation on x: the paper model's g sin(alpha) holds only its mean.
 TEST(FromTheImuAlone, ThrustVariation) {
-  const Diagnosis d = diagnose({.sim_effects = {"imu_tilt=0.3"}, .model = BaseModel::kPaper, .scenario = "agile"});
+  const Diagnosis d = diagnose({.sim_effects = {"imu_tilt=0.3"}, .model = ModelKind::paper, .scenario = "agile"});
   expect_found_first(d, control("agile"), "thrust");
 }
 

@@ -1,4 +1,4 @@
-// report.json and report.html from a Diagnosis built by hand: the fields and values, null for what could not
+// report.json and report.html from a Diagnosis built by hand: its documented fields and values, null for what could not
 // be computed, small and deterministic output, escaping, the tables and banner, and the gnuplot figures.
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -59,8 +59,13 @@ ModelFit fit(std::vector<std::string> effects, double rmse_train, double rmse_va
 }
 
 CandidateTrial candidate(std::string effect, double rmse_validation, bool significant, std::string skipped = {}) {
-  return {std::move(effect), rmse_validation * 0.95, rmse_validation, 12.0, significant ? 1e-6 : 0.4,
-          significant,       significant ? "" : "F-test: p = 0.4, not below 0.001 (0.01 / 10 candidates)",
+  return {std::move(effect),
+          rmse_validation * 0.95,
+          rmse_validation,
+          12.0,
+          significant ? 1e-6 : 0.4,
+          significant,
+          significant ? "" : "F-test: p = 0.4, not below 0.001 (0.01 / 10 candidates)",
           std::move(skipped)};
 }
 

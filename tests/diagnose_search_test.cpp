@@ -1,9 +1,9 @@
-// The undeclared-effect outcomes of `imubridge diagnose` (issue #6): a simulated flight with an effect the base model
-// lacks switched on. The search must add that effect first and at least halve the validation RMSE, with the reference
-// trajectory and from the IMU alone; it must find two effects together; and an effect outside the library must leave
-// a residual reported as not white, with the structure pointed at. Where physics makes an outcome impossible (an
-// effect the base model absorbs, or the IMU alone cannot see), the test asserts what does hold; docs/effects.md
-// explains each case.
+// The undeclared-effect outcomes of `imubridge diagnose` (docs/effects.md, "What the tests show"): a simulated flight
+// with an effect the base model lacks switched on. The search must add that effect first and at least halve the
+// validation RMSE, with the reference trajectory and from the IMU alone; it must find two effects together; and an
+// effect outside the library must leave a residual reported as not white, with the structure pointed at. Where physics
+// makes an outcome impossible (an effect the base model absorbs, or the IMU alone cannot see), the test asserts what
+// does hold; docs/effects.md explains each case.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -33,8 +33,8 @@ estimator::ImuSeries flight(const std::vector<std::string>& effects, const std::
 
 struct Case {
   std::vector<std::string> sim_effects;
-  VelocitySource velocity = VelocitySource::kReference;
-  BaseModel model = BaseModel::kPaper;
+  VelocitySource velocity = VelocitySource::reference;
+  ModelKind model = ModelKind::paper;
   int max_steps = 2;
   std::vector<std::pair<double, double>> ignore_bands{};
   std::vector<int> axes{0, 1};
@@ -73,7 +73,7 @@ const ParameterEstimate& param(const std::vector<ParameterEstimate>& params, con
   return *it;
 }
 
-// The issue's outcome: `effect` is the first step and the validation RMSE at least halves.
+// The outcome required of the loop: `effect` is the first step and the validation RMSE at least halves.
 void expect_found_first(const Diagnosis& d, const std::string& effect) {
   ASSERT_FALSE(d.steps.empty()) << "nothing added; base validation RMSE " << d.base.rmse_validation;
   EXPECT_EQ(d.steps.front().effect, effect);
@@ -81,9 +81,8 @@ void expect_found_first(const Diagnosis& d, const std::string& effect) {
 }
 
 class FoundFirst : public ::testing::TestWithParam<VelocitySource> {};
-INSTANTIATE_TEST_SUITE_P(BothVelocities, FoundFirst,
-                         ::testing::Values(VelocitySource::kReference, VelocitySource::kImu),
-                         [](const auto& info) { return info.param == VelocitySource::kImu ? "imu" : "reference"; });
+INSTANTIATE_TEST_SUITE_P(BothVelocities, FoundFirst, ::testing::Values(VelocitySource::reference, VelocitySource::eq12),
+                         [](const auto& info) { return info.param == VelocitySource::eq12 ? "imu" : "reference"; });
 
 TEST_P(FoundFirst, TimeOffset) {
   const Diagnosis d = diagnose({.sim_effects = {"time_offset=0.01"}, .velocity = GetParam(), .max_steps = 1});
@@ -109,7 +108,7 @@ TEST_P(FoundFirst, AccelCross) {
 // With the reference: drag and wind act on the true velocity and are found first. From the IMU alone, eq. (12)'s
 // velocity has no drag in its dynamics and drifts, so the search first makes it self-consistent and then finds them.
 TEST_P(FoundFirst, LinearDrag) {
-  const bool imu = GetParam() == VelocitySource::kImu;
+  const bool imu = GetParam() == VelocitySource::eq12;
   const Diagnosis d = diagnose({.sim_effects = {"linear_drag=1"}, .velocity = GetParam()});
   if (!imu) {
     expect_found_first(d, "linear_drag");
@@ -121,7 +120,7 @@ TEST_P(FoundFirst, LinearDrag) {
 }
 
 TEST_P(FoundFirst, Wind) {
-  const bool imu = GetParam() == VelocitySource::kImu;
+  const bool imu = GetParam() == VelocitySource::eq12;
   // IMU alone: a wind strong enough that eq. (12)'s drifting velocity carries no drag at all leaves nothing to start
   // from (docs/effects.md); a moderate one is found once the velocity is self-consistent.
   const Diagnosis d = diagnose({.sim_effects = {imu ? "wind=3,0" : "wind=10,0"}, .velocity = GetParam()});
@@ -139,7 +138,7 @@ TEST_P(FoundFirst, Wind) {
 // reference it only enters the centripetal term through r cos(beta), 0.015 m at the paper's pose: invisible.
 TEST_P(FoundFirst, GyroBias) {
   const Diagnosis d = diagnose({.sim_effects = {"gyro_bias=0.02"}, .velocity = GetParam(), .max_steps = 1});
-  if (GetParam() == VelocitySource::kImu) {
+  if (GetParam() == VelocitySource::eq12) {
     ASSERT_EQ(chosen(d), std::vector<std::string>{"gyro_bias"});
     EXPECT_NEAR(param(d.steps.front().params, "bias.x").value, 0.02, 0.001);
     EXPECT_NEAR(param(d.steps.front().params, "bias.y").value, 0.02, 0.001);
@@ -156,7 +155,7 @@ TEST_P(FoundFirst, GyroBias) {
 // 90 degrees, so such a fit is refused with its reason, and no wrong bias is reported.
 TEST(FoundFirstImu, AGyroBiasThatWouldTurnTheVehicleOverIsRefused) {
   const Diagnosis d =
-      diagnose({.sim_effects = {"gyro_bias=0.02"}, .velocity = VelocitySource::kImu, .max_steps = 1, .seed = 9});
+      diagnose({.sim_effects = {"gyro_bias=0.02"}, .velocity = VelocitySource::eq12, .max_steps = 1, .seed = 9});
   for (const Step& step : d.steps) {
     if (step.effect != "gyro_bias") continue;
     for (const auto& p : step.params) EXPECT_NEAR(p.value, 0.02, 0.005) << p.name;
@@ -172,7 +171,7 @@ TEST(FoundFirstImu, AGyroBiasThatWouldTurnTheVehicleOverIsRefused) {
 
 // The full model (rigid body and mounting) has no drag of its own; give the flight a strong one.
 TEST(FoundFirstFull, QuadraticDragWithTheReference) {
-  const Diagnosis d = diagnose({.sim_effects = {"quadratic_drag=0.5"}, .model = BaseModel::kFull, .max_steps = 1});
+  const Diagnosis d = diagnose({.sim_effects = {"quadratic_drag=0.5"}, .model = ModelKind::full, .max_steps = 1});
   expect_found_first(d, "quadratic_drag");
   EXPECT_NEAR(param(d.steps.front().params, "mu.x").value, 0.5, 0.02);
 }
@@ -200,7 +199,7 @@ TEST_P(FoundFirst, ThrustInTheAgileFlight) {
 Case without_drag(std::string sim_effect, VelocitySource velocity, std::string scenario) {
   return {.sim_effects = {std::move(sim_effect), "quadratic_drag=0"},
           .velocity = velocity,
-          .model = BaseModel::kFull,
+          .model = ModelKind::full,
           .max_steps = 1,
           .scenario = std::move(scenario)};
 }
@@ -276,7 +275,7 @@ TEST_P(FoundFirst, AccelBiasInTheClimbingFlightBelowTenHertz) {
 TEST_P(FoundFirst, ThrustInTheClimbingFlight) {
   const Diagnosis d = diagnose({.sim_effects = {"imu_tilt=0.3"},
                                 .velocity = GetParam(),
-                                .max_steps = GetParam() == VelocitySource::kImu ? 2 : 1,
+                                .max_steps = GetParam() == VelocitySource::eq12 ? 2 : 1,
                                 .scenario = "climb"});
   expect_found_first(d, "thrust");
 }
@@ -339,10 +338,10 @@ namespace imubridge::diagnose {
 namespace {
 
 TEST(AtBounds, AParameterOnOrWithinOnePercentOfABoundIsFlagged) {
-  const std::vector<Parameter> params{{"k.x", "1/s", 0.0, 0.0, 100.0},      // on 0, or within 1 of 100
-                                      {"scale.x", "", 0.0, -0.5, 0.5},     // within 0.005 of either
-                                      {"r", "m", 0.0, 0.0},                // one-sided at 0: only 0 itself
-                                      {"free", "m"}};                      // unbounded: never
+  const std::vector<Parameter> params{{"k.x", "1/s", 0.0, 0.0, 100.0},  // on 0, or within 1 of 100
+                                      {"scale.x", "", 0.0, -0.5, 0.5},  // within 0.005 of either
+                                      {"r", "m", 0.0, 0.0},             // one-sided at 0: only 0 itself
+                                      {"free", "m"}};                   // unbounded: never
   const std::vector<std::string> owners{"linear_drag", "accel_scale", "base", "base"};
   const auto flagged = [&](std::vector<double> values) { return parameters_at_bounds(params, values, owners); };
   EXPECT_TRUE(flagged({0.18, 0.0, 0.1, 1e6}).empty());  // a real drag of 0.18 1/s is not at its bound 0

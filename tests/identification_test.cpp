@@ -217,7 +217,7 @@ TEST(Windows, ParsesSecondsAndRejectsTheRest) {
 }
 
 TEST(Windows, PercentagesAreFractionsOfTheDataSpan) {
-  const std::vector<double> t{10.0, 11.0, 12.0, 13.0, 14.0};  // data end 15 s: the span is [10, 15)
+  const std::vector<double> t{10.0, 11.0, 12.0, 13.0, 14.0};      // data end 15 s: the span is [10, 15)
   EXPECT_EQ(parse_window("0:40%", t), (TimeWindow{10.0, 12.0}));  // one "%" makes both ends percentages
   EXPECT_EQ(parse_window("0%:40%", t), (TimeWindow{10.0, 12.0}));
   EXPECT_EQ(parse_window("40%:", t), (TimeWindow{12.0, std::numeric_limits<double>::infinity()}));
@@ -263,7 +263,7 @@ TEST(FullFromPaper, PlacesTheImuWhereThePaperGeometrySays) {
 // ---- evidence on the paper's scenario ----
 
 TEST(PaperScenario, LmRecoversThePapersParameters) {
-  const IdentifyResult r = identify(flight("paper").series, options(Method::kLm, VelocitySource::kReference));
+  const IdentifyResult r = identify(flight("paper").series, options(Method::lm, VelocitySource::reference));
   expect_paper_parameters(r.params.paper_x);
   // The roll axis sees the same IMU from the side: at r sin(beta) = 0.178 m straight above (beta = 90 deg), no tilt.
   EXPECT_NEAR(r.params.paper_y.r, kPaperR * std::sin(kPaperBeta), 0.02 * kPaperR);
@@ -282,8 +282,8 @@ TEST(PaperScenario, LmRecoversThePapersParameters) {
 
 TEST(PaperScenario, GaRecoversThePapersParametersAtLmsOptimum) {
   const Flight& f = flight("paper");
-  const IdentifyResult ga = identify(f.series, options(Method::kGa, VelocitySource::kReference));
-  const IdentifyResult lm = identify(f.series, options(Method::kLm, VelocitySource::kReference));
+  const IdentifyResult ga = identify(f.series, options(Method::ga, VelocitySource::reference));
+  const IdentifyResult lm = identify(f.series, options(Method::lm, VelocitySource::reference));
   expect_paper_parameters(ga.params.paper_x);
   // Same optimum: LM's is the exact minimum of OF; the GA's must be a tenth of a standard error from it or closer,
   // a difference the data cannot resolve.
@@ -299,7 +299,7 @@ TEST(PaperScenario, GaRecoversThePapersParametersAtLmsOptimum) {
 TEST(PaperScenario, GaIsBitForBitRepeatableAndOtherSeedsReachTheSameOptimum) {
   // 20 s of training halve the GA's work; the optimum compared against is LM's on the same 20 s.
   const Flight& f = flight("paper");
-  IdentifyOptions o = options(Method::kGa, VelocitySource::kReference);
+  IdentifyOptions o = options(Method::ga, VelocitySource::reference);
   o.train = TimeWindow{0.0, 20.0};
   o.ga.seed = 11;
   const IdentifyResult a = identify(f.series, o);
@@ -310,7 +310,7 @@ TEST(PaperScenario, GaIsBitForBitRepeatableAndOtherSeedsReachTheSameOptimum) {
   o.ga.seed = 12;
   const IdentifyResult c = identify(f.series, o);
   EXPECT_NE(a.fits[0].convergence, c.fits[0].convergence);  // another search...
-  o.method = Method::kLm;
+  o.method = Method::lm;
   const IdentifyResult lm = identify(f.series, o);
   expect_same_optimum(a.params.paper_x, lm.params);  // ...to the same place
   expect_same_optimum(c.params.paper_x, lm.params);
@@ -321,7 +321,7 @@ TEST(PaperScenario, GivenTheTrueAngularAccelerationTheResidualIsTheAccelerometer
   // terms, docs/model.md): the validation RMSE must be within 10 % of the noise actually in the x channel.
   const Flight& f = flight("paper");
   std::vector<PaperSample> samples =
-      prepare_paper(f.series, PaperAxis::kPitch, VelocitySource::kReference, IdentifyOptions{}.derivative_half_window);
+      prepare_paper(f.series, PaperAxis::pitch, VelocitySource::reference, IdentifyOptions{}.derivative_half_window);
   for (std::size_t k = 0; k < samples.size(); ++k) samples[k].omega_dot = true_pitch_rate(f, k);
   const PaperFit fit = fit_paper_lm(select(samples, kTrain), paper_linear_fit(select(samples, kTrain)));
   expect_paper_parameters(fit.params);
@@ -336,9 +336,9 @@ TEST(PaperScenario, ValidationRmseIsTheNoiseOfTheMeasuredInputs) {
   // omega_dot has content up to 20 Hz). The residual is then the accelerometer noise plus r sin(beta) times that
   // omega_dot error; the validation RMSE must be within 10 % of this floor, measured on the same samples.
   const Flight& f = flight("paper");
-  const IdentifyResult r = identify(f.series, options(Method::kLm, VelocitySource::kReference));
+  const IdentifyResult r = identify(f.series, options(Method::lm, VelocitySource::reference));
   const std::vector<PaperSample> samples =
-      prepare_paper(f.series, PaperAxis::kPitch, VelocitySource::kReference, IdentifyOptions{}.derivative_half_window);
+      prepare_paper(f.series, PaperAxis::pitch, VelocitySource::reference, IdentifyOptions{}.derivative_half_window);
   const double rate_error =
       rms_in(f, kValidation, [&](std::size_t k) { return samples[k].omega_dot - true_pitch_rate(f, k); });
   const double noise = accel_x_noise(f, kValidation);
@@ -353,14 +353,14 @@ TEST(PaperScenario, Eq12VelocityDriftsAndBiasesMuLow) {
   // Eq. (12) integrates the pitch but leaves drag out of the vehicle's dynamics, so its velocity drifts from the
   // true one; the drag regressed on it comes out low. The geometry (r, beta, alpha) does not depend on it.
   const Flight& f = flight("paper");
-  const IdentifyResult r = identify(f.series, options(Method::kLm, VelocitySource::kEq12));
+  const IdentifyResult r = identify(f.series, options(Method::lm, VelocitySource::eq12));
   EXPECT_NEAR(r.params.paper_x.r, kPaperR, 0.02 * kPaperR);
   EXPECT_NEAR(r.params.paper_x.beta, kPaperBeta, 1.0 * kDeg);
   EXPECT_NEAR(r.params.paper_x.alpha, kPaperAlpha, 0.1 * kDeg);
   EXPECT_LT(r.params.paper_x.mu, 0.95 * kPaperMu);
   const double h = IdentifyOptions{}.derivative_half_window;
-  const auto eq12 = prepare_paper(f.series, PaperAxis::kPitch, VelocitySource::kEq12, h);
-  const auto truth = prepare_paper(f.series, PaperAxis::kPitch, VelocitySource::kReference, h);
+  const auto eq12 = prepare_paper(f.series, PaperAxis::pitch, VelocitySource::eq12, h);
+  const auto truth = prepare_paper(f.series, PaperAxis::pitch, VelocitySource::reference, h);
   const double speed = rms_in(f, kTrain, [&](std::size_t k) { return truth[k].v; });
   const double drift = rms_in(f, kTrain, [&](std::size_t k) { return eq12[k].v - truth[k].v; });
   EXPECT_GT(drift, 0.25 * speed);
@@ -372,11 +372,11 @@ TEST(PaperScenario, Eq12VelocityDriftsAndBiasesMuLow) {
 TEST(FullModelIdentification, LmRecoversLeverArmMountingAndDrag) {
   // 15 s of training keep the test short. The bias is held: see the next test for why it must be on this flight.
   const Flight& f = flight("paper");
-  IdentifyOptions o = options(Method::kLm, VelocitySource::kReference);
+  IdentifyOptions o = options(Method::lm, VelocitySource::reference);
   o.train = TimeWindow{0.0, 15.0};
   const IdentifyResult paper = identify(f.series, o);
-  o.model = ModelKind::kFull;
-  o.hold.blocks[static_cast<int>(FullBlock::kAccelBias)] = true;
+  o.model = ModelKind::full;
+  o.hold.blocks[static_cast<int>(FullBlock::accel_bias)] = true;
   const IdentifyResult r = identify(f.series, o);
   const FullModelParams& p = r.params.full;
   const Eigen::Vector3d lever = kPaperR * Eigen::Vector3d(std::cos(kPaperBeta), 0.0, -std::sin(kPaperBeta));
@@ -394,8 +394,8 @@ TEST(FullModelIdentification, CorrelationShowsBiasAndTiltCannotBeToldApartOnThis
   // The thrust stays near g, so a tilt alpha of the sensor's x axis adds g sin(alpha), nearly a constant: the x
   // bias does the same. The correlation matrix must say so.
   const Flight& f = flight("paper");
-  IdentifyOptions o = options(Method::kLm, VelocitySource::kReference);
-  o.model = ModelKind::kFull;
+  IdentifyOptions o = options(Method::lm, VelocitySource::reference);
+  o.model = ModelKind::full;
   o.train = TimeWindow{0.0, 15.0};
   const IdentifyResult r = identify(f.series, o);
   const Uncertainty& u = r.fits[0].uncertainty;
@@ -413,7 +413,7 @@ TEST(VelocityEvaluation, BeatsTheRawInversionEq12AndStandingStill) {
   // the same flight: the filtered velocity must be well ahead of every alternative.
   for (const std::string scenario : {"center", "paper"}) {
     const Flight& f = flight(scenario);
-    const IdentifyResult r = identify(f.series, options(Method::kLm, VelocitySource::kReference));
+    const IdentifyResult r = identify(f.series, options(Method::lm, VelocitySource::reference));
     const VelocityEvaluation e = evaluate_velocity(f.series, r.params.full);
     EXPECT_GT(e.samples, f.samples.size() - 10);
     EXPECT_LT(e.estimator.horizontal, e.zero.horizontal) << scenario;

@@ -1,5 +1,7 @@
 // IMU axes: parsing, gravity detection, the auto rule, mismatch warnings, the reference frame's alignment, and the
 // whole mechanism: one flight written in several IMU orientations identifies and estimates the same.
+#include "estimator/imu_axes.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 #include <vector>
 
 #include "estimator/identify.hpp"
-#include "estimator/imu_axes.hpp"
 #include "pipeline/estimation_stage.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
@@ -21,9 +22,7 @@ using Eigen::Vector3d;
 
 constexpr double kDeg = kPi / 180.0;
 
-Matrix3d arbitrary_rotation() {
-  return Eigen::AngleAxisd(2.0, Vector3d(1, 2, 3).normalized()).toRotationMatrix();
-}
+Matrix3d arbitrary_rotation() { return Eigen::AngleAxisd(2.0, Vector3d(1, 2, 3).normalized()).toRotationMatrix(); }
 
 std::string r_spelling(const Matrix3d& r) {
   std::string s = "R:";
@@ -267,8 +266,8 @@ TEST(ImuAxesReference, AnFrdFlightWithTheBodysReferenceComesOutBitForBit) {
 TEST(ImuAxesOrientation, OneFlightInFrdFluAndAnyRotationIdentifiesAndEstimatesTheSame) {
   const ImuSeries& body = paper_flight();
   IdentifyOptions o;
-  o.model = ModelKind::kFull;
-  o.velocity = VelocitySource::kReference;
+  o.model = ModelKind::full;
+  o.velocity = VelocitySource::reference;
   o.train = TimeWindow{0.0, 20.0};
   const IdentifyResult base = identify(to_body(body, parse_imu_axes("frd"), ReferenceFrame::imu), o);
   const VelocityEvaluation base_v = evaluate_velocity(body, base.params.full);
@@ -295,8 +294,7 @@ TEST(ImuAxesOrientation, OneFlightInFrdFluAndAnyRotationIdentifiesAndEstimatesTh
   };
   const auto near = [](const auto& a, const auto& b, const char* what, const std::string& name) {
     const double scale = std::max(1e-3, b.norm());
-    EXPECT_LT((a - b).norm(), 1e-9 * scale) << name << " " << what << ": " << a.transpose() << " vs "
-                                             << b.transpose();
+    EXPECT_LT((a - b).norm(), 1e-9 * scale) << name << " " << what << ": " << a.transpose() << " vs " << b.transpose();
   };
   for (const Case& c : cases) {
     const ImuSeries series = to_body(written_in(body, c.imu_to_body), c.declared, c.frame);

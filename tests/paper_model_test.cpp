@@ -156,7 +156,7 @@ TEST(PreparePaperAxis, IntegratesEq11And12WithTheTrapezoidalRule) {
   // At a constant rate w: theta = w t exactly (trapezoidal is exact on it), v_X = g (1 - cos(w t)) / w, which the
   // trapezoidal rule reaches within t h^2 / 12 max|d2/dt2 g sin(w t)| = t h^2 g w^2 / 12.
   const double h = 0.01, w = 0.8;
-  const auto samples = prepare_paper_axis(ramp_series({0, w, 0}, {0, 0, 0}, h, 300), PaperAxis::kPitch);
+  const auto samples = prepare_paper_axis(ramp_series({0, w, 0}, {0, 0, 0}, h, 300), PaperAxis::pitch);
   for (const PaperSample& s : samples) {
     EXPECT_NEAR(s.theta, w * s.t, 1e-12);
     EXPECT_NEAR(s.v, kGravity * (1.0 - cos(w * s.t)) / w, s.t * h * h * kGravity * w * w / 12.0 + 1e-12);
@@ -169,26 +169,26 @@ TEST(PreparePaperAxis, IntegratesEq11And12WithTheTrapezoidalRule) {
 TEST(PreparePaperAxis, RollUsesMinusOmegaXItsDerivativeAndTheYAccelerometer) {
   // Rolling right at p: V_Y = g (1 - cos(p t)) / p (the thrust tilts toward +Y), so the paper-sign v is -V_Y.
   const double h = 0.01, p = 0.8;
-  const auto samples = prepare_paper_axis(ramp_series({p, 0, 0}, {0, 0, 0}, h, 300), PaperAxis::kRoll);
+  const auto samples = prepare_paper_axis(ramp_series({p, 0, 0}, {0, 0, 0}, h, 300), PaperAxis::roll);
   for (const PaperSample& s : samples) {
     EXPECT_EQ(s.omega, -p);
     EXPECT_NEAR(s.theta, -p * s.t, 1e-12);
     EXPECT_NEAR(s.v, -kGravity * (1.0 - cos(p * s.t)) / p, s.t * h * h * kGravity * p * p / 12.0 + 1e-12);
     EXPECT_EQ(s.f, -0.2 * std::round(s.t / h));  // accel.y
   }
-  for (const PaperSample& s : prepare_paper_axis(ramp_series({0, 0, 0}, {1.5, 0.5, 0}, h, 30), PaperAxis::kRoll))
+  for (const PaperSample& s : prepare_paper_axis(ramp_series({0, 0, 0}, {1.5, 0.5, 0}, h, 30), PaperAxis::roll))
     EXPECT_NEAR(s.omega_dot, -1.5, 1e-9);
-  for (const PaperSample& s : prepare_paper_axis(ramp_series({0, 0, 0}, {1.5, 0.5, 0}, h, 30), PaperAxis::kPitch))
+  for (const PaperSample& s : prepare_paper_axis(ramp_series({0, 0, 0}, {1.5, 0.5, 0}, h, 30), PaperAxis::pitch))
     EXPECT_NEAR(s.omega_dot, 0.5, 1e-9);
 }
 
 TEST(PreparePaperAxis, RejectsAnInvalidSeries) {
   ImuSeries s = ramp_series({0, 1, 0}, {0, 0, 0}, 0.01, 10);
   s.t[5] = s.t[4];
-  EXPECT_THROW(prepare_paper_axis(s, PaperAxis::kPitch), std::invalid_argument);
+  EXPECT_THROW(prepare_paper_axis(s, PaperAxis::pitch), std::invalid_argument);
   s = ramp_series({0, 1, 0}, {0, 0, 0}, 0.01, 10);
   s.accel.pop_back();
-  EXPECT_THROW(prepare_paper_axis(s, PaperAxis::kPitch), std::invalid_argument);
+  EXPECT_THROW(prepare_paper_axis(s, PaperAxis::pitch), std::invalid_argument);
 }
 
 // A pitch flight through the whole pipeline: gyro and accelerometer from physics, plus accelerometer noise.
@@ -214,7 +214,7 @@ TEST(PaperObjective, RmseAtTheTrueParametersIsTheNoiseAndGrowsAwayFromThem) {
     series.gyro.push_back({0.0, m.rate(t), 0.0});
     series.accel.push_back(r.sensor + Eigen::Vector3d(noise(rng), noise(rng), noise(rng)));
   }
-  const auto samples = prepare_paper_axis(series, PaperAxis::kPitch);
+  const auto samples = prepare_paper_axis(series, PaperAxis::pitch);
   const double at_truth = rmse(kPaperFit, samples);
   EXPECT_DOUBLE_EQ(objective(kPaperFit, samples), at_truth * std::sqrt(n));
   // The model's own errors (dropped terms, differentiation, integration) are far below the noise here, and the

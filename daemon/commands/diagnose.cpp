@@ -54,16 +54,16 @@ std::vector<int> parse_axes(const std::string& text) {
   throw std::invalid_argument("unknown axis \"" + text + "\" (valid: x, y, both)");
 }
 
-dg::BaseModel parse_model(const std::string& text) {
-  if (text == "paper") return dg::BaseModel::kPaper;
-  if (text == "full") return dg::BaseModel::kFull;
+dg::ModelKind parse_model(const std::string& text) {
+  if (text == "paper") return dg::ModelKind::paper;
+  if (text == "full") return dg::ModelKind::full;
   throw std::invalid_argument("unknown model \"" + text + "\" (valid: paper, full)");
 }
 
 dg::VelocitySource parse_velocity(const std::string& text) {
-  if (text == "reference") return dg::VelocitySource::kReference;
-  if (text == "imu") return dg::VelocitySource::kImu;
-  if (text == "filter") return dg::VelocitySource::kFilter;
+  if (text == "reference") return dg::VelocitySource::reference;
+  if (text == "imu") return dg::VelocitySource::eq12;
+  if (text == "filter") return dg::VelocitySource::filter;
   throw std::invalid_argument("unknown velocity source \"" + text + "\" (valid: reference, filter, imu)");
 }
 
@@ -186,14 +186,14 @@ int run(const DiagnoseCliOptions& o) {
   // The reference when the session has one, unless told otherwise. The filter's fit never reads it; a reference
   // read beside it only scores the velocity in the report.
   using pipeline::ReferenceUse;
-  const ReferenceUse reference = !o.velocity                                           ? ReferenceUse::when_present
-                                 : *options.velocity == dg::VelocitySource::kReference ? ReferenceUse::required
-                                 : *options.velocity == dg::VelocitySource::kFilter    ? ReferenceUse::when_present
-                                                                                       : ReferenceUse::none;
+  const ReferenceUse reference = !o.velocity                                          ? ReferenceUse::when_present
+                                 : *options.velocity == dg::VelocitySource::reference ? ReferenceUse::required
+                                 : *options.velocity == dg::VelocitySource::filter    ? ReferenceUse::when_present
+                                                                                      : ReferenceUse::none;
   const pipeline::SessionSeries session =
       pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference, .imu_axes = o.imu_axes});
   if (!options.velocity)
-    options.velocity = session.series.reference ? dg::VelocitySource::kReference : dg::VelocitySource::kFilter;
+    options.velocity = session.series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
   // Progress on a terminal only: a log file or a pipe gets the summary alone.
   const bool show_progress = isatty(STDERR_FILENO) == 1;

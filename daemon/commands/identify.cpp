@@ -169,7 +169,7 @@ int run(const IdentifyCliOptions& o) {
   options.ga = o.ga;
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   options.hold = parse_hold(o.hold);
-  if (!o.hold.empty() && options.model != est::ModelKind::kFull)
+  if (!o.hold.empty() && options.model != est::ModelKind::full)
     throw std::invalid_argument("--hold applies to --model full only");
 
   const store::Store store(o.db, {.read_only = true});
@@ -178,20 +178,20 @@ int run(const IdentifyCliOptions& o) {
                                     {.link = o.link,
                                      // Read when present in any case: the velocity the model gives is scored against it
                                      // (the filter's and eq. (12)'s fits never read it).
-                                     .reference = o.velocity && options.velocity == est::VelocitySource::kReference
+                                     .reference = o.velocity && options.velocity == est::VelocitySource::reference
                                                       ? pipeline::ReferenceUse::required
                                                       : pipeline::ReferenceUse::when_present,
                                      .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   if (!o.velocity)
-    options.velocity = session.series.reference ? est::VelocitySource::kReference : est::VelocitySource::kFilter;
-  if (options.velocity == est::VelocitySource::kFilter && options.method != est::Method::kLm)
+    options.velocity = session.series.reference ? est::VelocitySource::reference : est::VelocitySource::filter;
+  if (options.velocity == est::VelocitySource::filter && options.method != est::Method::lm)
     throw std::invalid_argument(
         o.velocity ? "--velocity filter fits by LM only (the GA would run the filter for every individual)"
                    : "session has no reference, so the velocity is the filter's, which fits by LM only (the GA would "
                      "run the filter for every individual); --velocity eq12 runs the paper's GA on the IMU alone");
   std::tie(options.train, options.validate) = o.windows.resolve(session.series);
-  const est::IdentifyResult result = options.velocity == est::VelocitySource::kFilter
+  const est::IdentifyResult result = options.velocity == est::VelocitySource::filter
                                          ? diagnose::identify_by_filter_error(session.series, options)
                                          : est::identify(session.series, options);
 
@@ -203,7 +203,7 @@ int run(const IdentifyCliOptions& o) {
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
   print_summary(o, result, options.velocity, session.link_id, wall);
-  if (options.velocity == est::VelocitySource::kEq12) {
+  if (options.velocity == est::VelocitySource::eq12) {
     if (const auto drift = est::eq12_drift_warning(session.series, result.params.full.mounting,
                                                    result.params.identification.fit_windows.front()))
       std::printf("warning: %s\n", drift->c_str());

@@ -10,7 +10,7 @@ class AccelBias final : public Effect {
   Stages stages() const override { return {.prediction = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     // g sin(alpha) is a constant too: only a thrust that varies (T sin(alpha)) tells the two apart.
-    if (setup.base == BaseModel::kPaper && !contains(in_model, "thrust"))
+    if (setup.base == ModelKind::paper && !contains(in_model, "thrust"))
       return "indistinguishable from eq. (14)'s g sin(alpha): both add a constant (add thrust first)";
     return std::nullopt;
   }

@@ -10,7 +10,7 @@ class AccelScale final : public Effect {
   Stages stages() const override { return {.sensor = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
     // Eq. (14) is linear in g sin(alpha), r cos(beta), r sin(beta) and mu, all per axis: scaling the axis scales them.
-    if (setup.base == BaseModel::kPaper) return "absorbed by eq. (14)'s per-axis r, alpha and mu";
+    if (setup.base == ModelKind::paper) return "absorbed by eq. (14)'s per-axis r, alpha and mu";
     return std::nullopt;
   }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {

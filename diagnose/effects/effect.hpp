@@ -23,25 +23,26 @@
 
 #include "diagnose/signals.hpp"
 #include "estimator/drag_velocity.hpp"
+#include "estimator/identify_choices.hpp"
 #include "estimator/paper_model.hpp"
 
 namespace imubridge::diagnose {
 
-enum class BaseModel { kPaper, kFull };  // eq. (14) per axis; the 3-D rigid body and mounting
-// The reference trajectory; integrated from the gyro (eq. 12); or the drag-velocity filter's one-step prediction
-// (the filter error method, docs/identification.md), which runs the model being fitted.
-enum class VelocitySource { kReference, kImu, kFilter };
+// The base model and the velocity the drag term sees are identify's choices (estimator/identify_choices.hpp):
+// with the filter, its one-step prediction (the filter error method, docs/identification.md).
+using estimator::ModelKind;
+using estimator::VelocitySource;
 
 // What the effects know of the diagnosis.
 struct ModelSetup {
-  BaseModel base = BaseModel::kPaper;
-  VelocitySource velocity = VelocitySource::kReference;
+  ModelKind base = ModelKind::paper;
+  VelocitySource velocity = VelocitySource::reference;
   std::vector<int> axes{0, 1};  // diagnosed axes: 0 = x, 1 = y (paper: sensor axes; full: levelled body axes)
   const Signals* signals = nullptr;
   std::vector<std::pair<double, double>> ignore_bands;  // Hz: the frequency search leaves these alone
   // > 0: measured and predicted are low-passed alike (zero phase, lowpass.hpp) before they are compared, Hz.
   double lowpass_hz = 0.0;
-  // kFilter: the filter's noises (the measurement noise set from the data: docs/identification.md).
+  // velocity `filter`: the filter's noises (the measurement noise set from the data: docs/identification.md).
   estimator::DragVelocityConfig filter{};
   std::size_t filter_block = 1;  // samples per block mean the filter runs on (identification_block)
 };
@@ -77,7 +78,7 @@ struct DragLaw {
 struct ModelInputs {
   std::vector<Eigen::Vector3d> gyro, gyro_rate;  // IMU axes
   std::vector<Eigen::Vector3d> velocity;         // body-axis AIR velocity (ground velocity minus wind), m/s
-  // body -> NED (reference, or integrated from the gyro); empty with kFilter, whose attitude is its own state
+  // body -> NED (reference, or integrated from the gyro); empty with velocity `filter`, whose attitude is its own state
   std::vector<Eigen::Quaterniond> attitude;
   std::vector<double> thrust;  // T, m/s^2: g, or the measured body-z reading (measured_thrust)
 };

@@ -10,7 +10,7 @@ namespace {
 // The gyro axes the model uses: the paper's pitch axis (x) reads gyro y, its roll axis (y) gyro x; the full model
 // all three.
 std::vector<int> gyro_axes(const ModelSetup& setup) {
-  if (setup.base == BaseModel::kFull) return {0, 1, 2};
+  if (setup.base == ModelKind::full) return {0, 1, 2};
   std::vector<int> axes;
   for (int axis : setup.axes) axes.push_back(axis == 0 ? 1 : 0);
   return axes;
@@ -30,8 +30,8 @@ class GyroBias final : public Effect {
   // turn freely and starts at zero.
   std::optional<std::string> start(const StartContext& ctx, std::span<double> p) const override {
     const Signals& s = *ctx.setup.signals;
-    const std::size_t first = static_cast<std::size_t>(std::lower_bound(s.t.begin(), s.t.end(), ctx.t.front()) -
-                                                       s.t.begin());
+    const std::size_t first =
+        static_cast<std::size_t>(std::lower_bound(s.t.begin(), s.t.end(), ctx.t.front()) - s.t.begin());
     const Eigen::Matrix3d imu_to_body = level_rotation(s);
     Eigen::Vector3d mean_body = Eigen::Vector3d::Zero();
     for (std::size_t k = first; k < first + ctx.t.size(); ++k) mean_body += imu_to_body * s.gyro[k];
@@ -42,7 +42,8 @@ class GyroBias final : public Effect {
     for (std::size_t i = 0; i < axes.size(); ++i) p[i] = mean_imu[axes[i]];
     return std::nullopt;
   }
-  void adjust_gyro(std::span<const double> p, const ModelSetup& setup, std::vector<Eigen::Vector3d>& gyro) const override {
+  void adjust_gyro(std::span<const double> p, const ModelSetup& setup,
+                   std::vector<Eigen::Vector3d>& gyro) const override {
     const std::vector<int> axes = gyro_axes(setup);
     for (Eigen::Vector3d& w : gyro) {
       for (std::size_t i = 0; i < axes.size(); ++i) w[axes[i]] -= p[i];

@@ -12,7 +12,7 @@ class LeverArmZ final : public Effect {
   std::string_view name() const override { return "lever_arm_z"; }
   Stages stages() const override { return {.prediction = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
-    if (setup.base == BaseModel::kFull) return "the full model's lever arm is already three-dimensional";
+    if (setup.base == ModelKind::full) return "the full model's lever arm is already three-dimensional";
     return std::nullopt;
   }
   std::vector<Parameter> parameters(const ModelSetup&) const override { return {{"z", "m", 0.0, -1.0, 1.0}}; }
@@ -23,8 +23,8 @@ class LeverArmZ final : public Effect {
     for (std::size_t i = 0; i < ctx.setup.axes.size(); ++i) {
       const estimator::PaperAxisParams& axis = ctx.paper[i];
       const double in_plane = axis.r * std::cos(axis.beta);
-      const Eigen::Vector3d r = ctx.setup.axes[i] == 0 ? Eigen::Vector3d(in_plane, 0.0, z)
-                                                       : Eigen::Vector3d(0.0, in_plane, z);
+      const Eigen::Vector3d r =
+          ctx.setup.axes[i] == 0 ? Eigen::Vector3d(in_plane, 0.0, z) : Eigen::Vector3d(0.0, in_plane, z);
       const double sin_alpha = std::sin(axis.alpha);
       for (std::size_t k = 0; k < ctx.count; ++k) {
         const Eigen::Vector3d& w = ctx.inputs.gyro[ctx.first + k];

@@ -10,7 +10,7 @@ class QuadraticDrag final : public Effect {
   std::string_view name() const override { return "quadratic_drag"; }
   Stages stages() const override { return {.drag = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
-    if (setup.base == BaseModel::kPaper) return "eq. (14) already has the quadratic drag mu";
+    if (setup.base == ModelKind::paper) return "eq. (14) already has the quadratic drag mu";
     return std::nullopt;
   }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {

@@ -11,10 +11,10 @@ class SelfConsistentVelocity final : public Effect {
   std::string_view name() const override { return "self_consistent_velocity"; }
   Stages stages() const override { return {.drag_in_dynamics = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
-    if (setup.velocity == VelocitySource::kReference) return "the velocity comes from the reference trajectory";
-    if (setup.velocity == VelocitySource::kFilter) return "the filter's velocity has the drag in its dynamics already";
+    if (setup.velocity == VelocitySource::reference) return "the velocity comes from the reference trajectory";
+    if (setup.velocity == VelocitySource::filter) return "the filter's velocity has the drag in its dynamics already";
     const bool drag =
-        setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
+        setup.base == ModelKind::paper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
     if (!drag) return "the model has no drag law to integrate yet";
     return std::nullopt;
   }

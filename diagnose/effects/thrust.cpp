@@ -10,7 +10,7 @@ class Thrust final : public Effect {
   std::string_view name() const override { return "thrust"; }
   Stages stages() const override { return {.measured_thrust = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string>) const override {
-    if (setup.base == BaseModel::kFull)
+    if (setup.base == ModelKind::full)
       return "the full model's residual is in body axes, where the thrust has no horizontal component";
     return std::nullopt;
   }

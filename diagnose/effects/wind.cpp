@@ -10,7 +10,7 @@ class Wind final : public Effect {
   Stages stages() const override { return {.wind = true}; }
   std::optional<std::string> why_not(const ModelSetup& setup, std::span<const std::string> in_model) const override {
     const bool drag =
-        setup.base == BaseModel::kPaper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
+        setup.base == ModelKind::paper || contains(in_model, "linear_drag") || contains(in_model, "quadratic_drag");
     if (!drag && needs(setup, in_model).empty()) return "wind acts through drag, and the model has none yet";
     return std::nullopt;
   }
@@ -18,7 +18,7 @@ class Wind final : public Effect {
   // only the quadratic law's asymmetry (upwind and downwind manoeuvres drag differently) and turns of the heading
   // tell the wind apart. So without a quadratic drag, the wind comes with one.
   std::vector<std::string> needs(const ModelSetup& setup, std::span<const std::string> in_model) const override {
-    if (setup.velocity != VelocitySource::kFilter || setup.base == BaseModel::kPaper ||
+    if (setup.velocity != VelocitySource::filter || setup.base == ModelKind::paper ||
         contains(in_model, "quadratic_drag"))
       return {};
     return {"quadratic_drag"};
