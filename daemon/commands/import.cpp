@@ -1,5 +1,5 @@
-// `imubridge import euroc`: an EuRoC/ASL dataset into a new session, from bytes like a recorded flight, with its
-// reference trajectory. docs/replay.md.
+// `imubridge import euroc|ulog`: an EuRoC/ASL dataset or a PX4 ULog file into a new session, from bytes like a
+// recorded flight, with its reference trajectory. docs/replay.md.
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <string>
@@ -7,6 +7,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config.hpp"
 #include "replay/euroc_import.hpp"
+#include "replay/ulog_import.hpp"
 
 namespace imubridge::cli {
 namespace {
@@ -17,6 +18,9 @@ struct ImportCommandOptions {
   double accel_lsb = replay::EurocImportOptions{}.accel_lsb;
   double gyro_lsb = replay::EurocImportOptions{}.gyro_lsb;
   std::string imu_axes = "auto";
+  bool no_reference = false;
+  // Whether the user gave these: ulog has its own defaults for what was not given.
+  bool imu_axes_given = false, accel_lsb_given = false, gyro_lsb_given = false;
 };
 
 void print_lines(const char* what, const replay::ImportedFile& file, const replay::LinesByReason& lines) {
@@ -26,7 +30,55 @@ void print_lines(const char* what, const replay::ImportedFile& file, const repla
   for (const auto& line : lines.summary()) std::fprintf(stderr, "  %s\n", line.c_str());
 }
 
+int run_import_ulog(const ImportCommandOptions& o) {
+  if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a ULog file holds its own");
+  replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
+  if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
+  if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
+  if (o.imu_axes_given) options.imu_axes = o.imu_axes;
+  store::Store store(o.db);
+  const auto r = replay::import_ulog(store, options);
+  std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
+               static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
+               static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
+               static_cast<long long>(r.session));
+  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
+  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
+  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
+  for (const auto& [reason, count] : r.skipped) {
+    std::fprintf(stderr, "skipped %llu %s records: %s\n", static_cast<unsigned long long>(count),
+                 r.imu_source.c_str(), reason.c_str());
+  }
+  if (r.clipped > 0) {
+    std::fprintf(stderr, "warning: %llu samples beyond the frames' range, clipped\n",
+                 static_cast<unsigned long long>(r.clipped));
+  }
+  if (o.no_reference) {
+    std::fprintf(stderr, "no reference trajectory (--no-reference)\n");
+  } else if (r.reference_rows == 0) {
+    std::fprintf(stderr, "no reference trajectory (the log has no usable vehicle_attitude + vehicle_local_position)\n");
+  } else {
+    std::fprintf(stderr, "reference: %llu rows (vehicle_local_position, attitude from vehicle_attitude)\n",
+                 static_cast<unsigned long long>(r.reference_rows));
+  }
+  for (const auto& [reason, count] : r.reference_skipped) {
+    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
+  }
+  std::fprintf(stderr, "events: %llu logged strings, %llu dropouts (%llu ms)%s\n",
+               static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.dropouts),
+               static_cast<unsigned long long>(r.dropout_ms),
+               r.data_appended ? (", appended data: " + std::to_string(r.appended_messages) + " messages").c_str() : "");
+  if (r.damage) {
+    std::fprintf(stderr, "warning: %s is damaged: %s; everything before it is imported\n", o.dir.c_str(),
+                 r.damage->c_str());
+  }
+  std::printf("%lld\n", static_cast<long long>(r.session));
+  return 0;
+}
+
 int run_import(const ImportCommandOptions& o) {
+  if (o.format == "ulog") return run_import_ulog(o);
+  if (o.no_reference) throw std::invalid_argument("--no-reference is for ulog");
   replay::EurocImportOptions options{
       .dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb, .imu_axes = o.imu_axes};
   if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
@@ -55,29 +107,42 @@ int run_import(const ImportCommandOptions& o) {
 const RegisterCommand kImport([](CLI::App& app) -> CommandRunner {
   auto o = std::make_shared<ImportCommandOptions>();
   auto* cmd = app.add_subcommand("import", "Import a dataset as a new session (prints its id last)");
-  cmd->add_option("format", o->format, "Dataset format")->check(CLI::IsMember({"euroc"}))->required();
-  cmd->add_option("dir", o->dir, "The dataset's directory (the one holding mav0/)")->required();
+  cmd->add_option("format", o->format, "Dataset format")->check(CLI::IsMember({"euroc", "ulog"}))->required();
+  cmd->add_option("dir", o->dir, "euroc: the dataset's directory (the one holding mav0/); ulog: the .ulg file")
+      ->required();
   auto* reference = cmd->add_option("--reference", o->reference,
                                     "Reference trajectory (default: mav0/state_groundtruth_estimate0/data.csv)");
   cmd->add_option("--reference-format", o->reference_format, "Format of --reference")
       ->check(CLI::IsMember({"tum", "euroc-gt"}))
       ->needs(reference)
       ->capture_default_str();
+  cmd->add_flag("--no-reference", o->no_reference,
+                "ulog: leave out the reference trajectory (vehicle_attitude + vehicle_local_position)");
   cmd->add_option("--db", o->db, "The session store to import into")->capture_default_str();
-  cmd->add_option("--imu-axes", o->imu_axes,
+  auto* imu_axes = cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
-                  "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes)")
+                  "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes); ulog: frd")
       ->capture_default_str();
-  cmd->add_option("--accel-lsb", o->accel_lsb, "Accelerometer resolution of the imported frames, m/s^2 per count")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--gyro-lsb", o->gyro_lsb, "Gyro resolution of the imported frames, rad/s per count")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  auto* accel_lsb =
+      cmd->add_option("--accel-lsb", o->accel_lsb,
+                      "Accelerometer resolution of the imported frames, m/s^2 per count (ulog: 5e-3)")
+          ->check(CLI::PositiveNumber)
+          ->capture_default_str();
+  auto* gyro_lsb =
+      cmd->add_option("--gyro-lsb", o->gyro_lsb, "Gyro resolution of the imported frames, rad/s per count (ulog: 1.1e-3)")
+          ->check(CLI::PositiveNumber)
+          ->capture_default_str();
   cmd->footer(
       "Rows that cannot be used are skipped and reported by line and reason; values beyond the frames'\n"
-      "range are clipped and reported. tum: 't x y z qx qy qz qw', t in s; euroc-gt: EuRoC's ground-truth CSV.");
-  return [o] { return run_import(*o); };
+      "range are clipped and reported. tum: 't x y z qx qy qz qw', t in s; euroc-gt: EuRoC's ground-truth CSV.\n"
+      "ulog: a PX4 log; IMU from sensor_combined (or sensor_accel + sensor_gyro), reference from vehicle_attitude\n"
+      "and vehicle_local_position, logged strings and dropouts as events, parameters and info in the config.");
+  return [o, imu_axes, accel_lsb, gyro_lsb] {
+    o->imu_axes_given = imu_axes->count() > 0;
+    o->accel_lsb_given = accel_lsb->count() > 0;
+    o->gyro_lsb_given = gyro_lsb->count() > 0;
+    return run_import(*o);
+  };
 });
 
 }  // namespace
