@@ -21,6 +21,7 @@
 #include "pipeline/estimation_stage.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
+#include "tests/paper_params.hpp"
 #include "tests/run_command.hpp"
 
 namespace imubridge::test {
@@ -68,10 +69,7 @@ class ReplayCommand : public ::testing::Test {
 
   // The paper's parameters as PARAMS.json, so that the estimates carry velocities.
   std::pair<fs::path, estimator::ModelParams> paper_params_file() const {
-    estimator::ModelParams p;
-    p.full.lever_arm = {sim::kPaperR * std::cos(sim::kPaperBeta), 0.0, -sim::kPaperR * std::sin(sim::kPaperBeta)};
-    p.full.mounting = {0.0, sim::kPaperAlpha, 0.0};
-    p.full.drag_quadratic = {sim::kPaperMu, sim::kPaperMu};
+    const estimator::ModelParams p = paper_params();
     const fs::path path = dir_ / "PARAMS.json";
     std::ofstream(path) << json(p).dump(2);
     return {path, p};

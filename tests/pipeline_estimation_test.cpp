@@ -7,6 +7,7 @@
 #include "pipeline/link_decoder.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "tests/paper_params.hpp"
 
 namespace imubridge::pipeline {
 namespace {
@@ -22,13 +23,7 @@ std::vector<protocol::Sample> decoded_flight(const std::string& scenario, double
   return samples;
 }
 
-estimator::ModelParams paper_params() {
-  estimator::ModelParams p;
-  p.full.lever_arm = {sim::kPaperR * std::cos(sim::kPaperBeta), 0.0, -sim::kPaperR * std::sin(sim::kPaperBeta)};
-  p.full.mounting = {0.0, sim::kPaperAlpha, 0.0};
-  p.full.drag_quadratic = {sim::kPaperMu, sim::kPaperMu};
-  return p;
-}
+using test::paper_params;
 
 TEST(EstimationStage, EverySampleButTheLastDelayOnesGetsOneEstimateInOrder) {
   const auto samples = decoded_flight("paper", 3.0, 2);

@@ -1,25 +1,19 @@
 // The engine every session runs through: decoding, estimation and the fan-out to sinks, in order.
-#include "pipeline/session_engine.hpp"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <string>
 #include <vector>
 
+#include "pipeline/session_engine.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "tests/paper_params.hpp"
 
 namespace imubridge::pipeline {
 namespace {
 
-estimator::ModelParams paper_params() {
-  estimator::ModelParams p;
-  p.full.lever_arm = {sim::kPaperR * std::cos(sim::kPaperBeta), 0.0, -sim::kPaperR * std::sin(sim::kPaperBeta)};
-  p.full.mounting = {0.0, sim::kPaperAlpha, 0.0};
-  p.full.drag_quadratic = {sim::kPaperMu, sim::kPaperMu};
-  return p;
-}
+using test::paper_params;
 
 // A simulated flight's wire bytes, cut into chunks of 100 bytes as a serial port might return them.
 std::vector<std::vector<std::uint8_t>> flight_chunks(double seconds) {
@@ -98,7 +92,8 @@ TEST(SessionEngine, GivesEverySinkTheDecodedSamplesAndTheStagesEstimatesInOrder)
   ASSERT_GE(log.size(), 4u);
   EXPECT_EQ(log[0], "a bytes 0");
   EXPECT_EQ(log[1], "b bytes 0");
-  const auto first_sample = std::find_if(log.begin(), log.end(), [](const auto& l) { return l.starts_with("a sample"); });
+  const auto first_sample =
+      std::find_if(log.begin(), log.end(), [](const auto& l) { return l.starts_with("a sample"); });
   ASSERT_NE(first_sample, log.end());
   EXPECT_EQ(*std::next(first_sample), "b" + first_sample->substr(1));
   EXPECT_EQ(log[log.size() - 2], "a final");
@@ -120,7 +115,8 @@ TEST(SessionEngine, ALinkWaitingForItsAxesReleasesItsEstimatesAtTheEnd) {
   ASSERT_GT(sink.samples.size(), 50u);
   EXPECT_TRUE(sink.estimates.empty());
   engine.finish();
-  EXPECT_EQ(sink.final_estimates.size(), sink.samples.size() - 2 * static_cast<std::size_t>(engine.stage().delay_samples()));
+  EXPECT_EQ(sink.final_estimates.size(),
+            sink.samples.size() - 2 * static_cast<std::size_t>(engine.stage().delay_samples()));
 }
 
 TEST(SessionEngine, ARemovedSinkHearsNothingMore) {

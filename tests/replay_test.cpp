@@ -18,6 +18,7 @@
 #include "replay/session_lookup.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "tests/paper_params.hpp"
 
 namespace imubridge::replay {
 namespace {
@@ -28,13 +29,7 @@ using protocol::WireFormat;
 constexpr std::int64_t kMonoAtStart = 7'000'000'000;              // the ground station's uptime when recording began
 constexpr std::int64_t kWallAtStart = 1'700'000'000'000'000'000;  // and the wall clock then
 
-estimator::ModelParams paper_params() {
-  estimator::ModelParams p;
-  p.full.lever_arm = {sim::kPaperR * std::cos(sim::kPaperBeta), 0.0, -sim::kPaperR * std::sin(sim::kPaperBeta)};
-  p.full.mounting = {0.0, sim::kPaperAlpha, 0.0};
-  p.full.drag_quadratic = {sim::kPaperMu, sim::kPaperMu};
-  return p;
-}
+using test::paper_params;
 
 // A received byte stream: chunks with their receive times, in seconds since recording began.
 using Stream = std::vector<std::pair<double, std::vector<std::uint8_t>>>;
