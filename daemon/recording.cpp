@@ -109,7 +109,7 @@ void Daemon::close_recording() {
   try {
     for (auto& link : links_) {
       tail.clear();
-      link->recorder->finish(mono, wall, tail);
+      link->decoding->finish(mono, wall, tail);
       std::vector<store::Estimate> estimates;
       for (const auto& sample : tail) engine_->stage().update(sample, estimates);
       engine_->stage().finish(estimates);  // links still waiting for their axes

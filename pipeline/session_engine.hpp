@@ -12,13 +12,13 @@
 
 #include "pipeline/estimation_stage.hpp"
 #include "pipeline/link_decoder.hpp"
-#include "pipeline/link_recorder.hpp"
 #include "protocol/sample.hpp"
 #include "store/records.hpp"
 
 namespace imubridge::pipeline {
 
-// How a link's chunks become samples: a LinkDecoder, or a LinkRecorder that also stores what it decodes.
+// How a link's chunks become samples: a LinkDecoder (DecodeOnly), or the daemon's recording link, whose
+// LinkRecorder also stores what it decodes.
 class ChunkDecoding {
  public:
   virtual ~ChunkDecoding() = default;
@@ -43,22 +43,6 @@ class DecodeOnly final : public ChunkDecoding {
 
  private:
   LinkDecoder& decoder_;
-};
-
-// Recording while decoding: the chunk, its samples and the decoder's losses go to the store (LinkRecorder).
-class RecordAndDecode final : public ChunkDecoding {
- public:
-  explicit RecordAndDecode(LinkRecorder& recorder) : recorder_(recorder) {}
-  void decode(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
-              std::vector<protocol::Sample>& out) override {
-    recorder_.on_chunk(bytes, recv_mono_ns, recv_wall_ns, out);
-  }
-  void finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& out) override {
-    recorder_.finish(mono_ns, wall_ns, out);
-  }
-
- private:
-  LinkRecorder& recorder_;
 };
 
 // Something downstream of the engine. Each hook has a default that ignores it, so a sink overrides what it uses.

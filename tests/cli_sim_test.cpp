@@ -10,37 +10,32 @@
 namespace imubridge::test {
 namespace {
 
-TEST(SimCli, ADurationBeyondADayIsRefusedInOneLine) {
+// `sim OPTION VALUE` is refused for each value: exit code 2 and one line that says each of `said`.
+void expect_refused(const std::string& option, std::initializer_list<const char*> values,
+                    std::initializer_list<const char*> said) {
   TempDir dir;
-  for (const char* duration : {"1e300", "1e7", "86401", "0", "-1"}) {
-    const auto r = run_imubridge(std::string("sim --duration ") + duration + " --file " + (dir / "f.bin").string());
-    EXPECT_EQ(r.exit_code, 2) << duration;
+  for (const char* value : values) {
+    const auto r = run_imubridge("sim " + option + " " + value + " --file " + (dir / "f.bin").string());
+    EXPECT_EQ(r.exit_code, 2) << option << " " << value;
     EXPECT_EQ(count_lines(r.err), 1) << r.err;
-    EXPECT_NE(r.err.find("at most 86400 s (24 h)"), std::string::npos) << r.err;
+    for (const char* words : said) EXPECT_NE(r.err.find(words), std::string::npos) << r.err;
   }
+}
+
+TEST(SimCli, ADurationBeyondADayIsRefusedInOneLine) {
+  expect_refused("--duration", {"1e300", "1e7", "86401", "0", "-1"}, {"at most 86400 s (24 h)"});
   EXPECT_NE(run_imubridge("sim --help").out.find("at most 86400 (24 h)"), std::string::npos);
 }
 
 TEST(SimCli, ASpeedOutsideItsRangeIsRefusedInOneLine) {
-  TempDir dir;
-  for (const char* speed : {"1e-300", "0.0009", "1001", "1e300", "0", "-1"}) {
-    const auto r = run_imubridge(std::string("sim --speed ") + speed + " --file " + (dir / "f.bin").string());
-    EXPECT_EQ(r.exit_code, 2) << speed;
-    EXPECT_EQ(count_lines(r.err), 1) << r.err;
-    EXPECT_NE(r.err.find("--speed "), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find("must be from 0.001 to 1000 times real time"), std::string::npos) << r.err;
-  }
+  expect_refused("--speed", {"1e-300", "0.0009", "1001", "1e300", "0", "-1"},
+                 {"--speed ", "must be from 0.001 to 1000 times real time"});
   EXPECT_NE(run_imubridge("sim --help").out.find("from 0.001 to 1000"), std::string::npos);
 }
 
 TEST(SimCli, ARateOutsideItsRangeIsRefusedInOneLine) {
+  expect_refused("--rate", {"1e9", "10001", "0.5", "0", "-100", "1e-300"}, {"must be from 1 to 10000 Hz"});
   TempDir dir;
-  for (const char* rate : {"1e9", "10001", "0.5", "0", "-100", "1e-300"}) {
-    const auto r = run_imubridge(std::string("sim --rate ") + rate + " --file " + (dir / "f.bin").string());
-    EXPECT_EQ(r.exit_code, 2) << rate;
-    EXPECT_EQ(count_lines(r.err), 1) << r.err;
-    EXPECT_NE(r.err.find("must be from 1 to 10000 Hz"), std::string::npos) << r.err;
-  }
   EXPECT_EQ(run_imubridge("sim --rate 10000 --duration 0.01 --file " + (dir / "f.bin").string()).exit_code, 0);
 }
 

@@ -54,6 +54,14 @@ std::string format_number(double value) {
   return text.str();
 }
 
+// An option's value outside [min, max], named in one line: "--rate 1e+09: must be from 1 to 10000 Hz".
+void require_within(const char* option, double value, double min, double max, const char* unit) {
+  if (!(value >= min && value <= max)) {
+    throw std::invalid_argument(std::string(option) + " " + format_number(value) + ": must be from " +
+                                format_number(min) + " to " + format_number(max) + " " + unit);
+  }
+}
+
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void on_stop_signal(int) { g_stop = 1; }
 
@@ -107,14 +115,14 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
-  const pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
-      store,
-      {.kind = "sim",
-       .source = "imubridge sim " + describe(o, config).dump(),
-       .config = describe(o, config),
-       .started_wall_ns = start_wall},
-      {{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
-        .device = "simulated IMU, scenario " + o.scenario}});
+  const pipeline::RecordedSession recorded =
+      pipeline::begin_recorded_session(store,
+                                       {.kind = "sim",
+                                        .source = "imubridge sim " + describe(o, config).dump(),
+                                        .config = describe(o, config),
+                                        .started_wall_ns = start_wall},
+                                       {{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
+                                         .device = "simulated IMU, scenario " + o.scenario}});
   const std::int64_t session = recorded.id;
   pipeline::LinkRecorder& recorder = *recorded.recorders[0];
   sim::FrameEncoder encoder(format);
@@ -293,14 +301,8 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   out->add_option("--file", o->file, "Write the wire bytes to this file");
   out->require_option(1);
   return [o] {
-    if (o->rate_hz && !(*o->rate_hz >= kMinRateHz && *o->rate_hz <= kMaxRateHz)) {
-      throw std::invalid_argument("--rate " + format_number(*o->rate_hz) + ": must be from " +
-                                  format_number(kMinRateHz) + " to " + format_number(kMaxRateHz) + " Hz");
-    }
-    if (!(o->speed >= kMinSpeed && o->speed <= kMaxSpeed)) {
-      throw std::invalid_argument("--speed " + format_number(o->speed) + ": must be from " + format_number(kMinSpeed) +
-                                  " to " + format_number(kMaxSpeed) + " times real time");
-    }
+    if (o->rate_hz) require_within("--rate", *o->rate_hz, kMinRateHz, kMaxRateHz, "Hz");
+    require_within("--speed", o->speed, kMinSpeed, kMaxSpeed, "times real time");
     const sim::SimConfig config = make_config(*o);
     if (!o->db.empty()) return record_to_db(*o, config);
     if (!o->euroc.empty()) return write_euroc(*o, config);
