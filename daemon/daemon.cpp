@@ -64,8 +64,9 @@ void configure_logging(const Config& config) {
   spdlog::set_default_logger(std::move(logger));
 }
 
-// A link's chunks through its recorder while recording, else through its decoder. A store that fails mid-chunk ends
-// the recording (the links go on): that chunk is decoded again without it, so its samples still reach the sinks.
+// A link's chunks through its recorder (pipeline::RecordAndDecode) while recording, else through its decoder. A store
+// that fails mid-chunk ends the recording (the links go on): that chunk is decoded again without it, so its samples
+// still reach the sinks.
 class Daemon::LinkDecoding final : public pipeline::ChunkDecoding {
  public:
   LinkDecoding(Daemon& daemon, Link& link) : daemon_(daemon), link_(link) {}
@@ -73,7 +74,7 @@ class Daemon::LinkDecoding final : public pipeline::ChunkDecoding {
               std::vector<protocol::Sample>& out) override {
     if (link_.recorder) {
       try {
-        link_.recorder->on_chunk(bytes, recv_mono_ns, recv_wall_ns, out);
+        link_.recorder->decode(bytes, recv_mono_ns, recv_wall_ns, out);
         return;
       } catch (const store::StoreError& e) {
         daemon_.stop_recording(daemon_.stopping_here(e.what()));
@@ -203,6 +204,8 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
 }
 
 Daemon::~Daemon() = default;
+
+pipeline::EstimationStage& Daemon::stage() { return *engine_->stage(); }
 
 int Daemon::run() {
   for (auto& link : links_) link->port->start();

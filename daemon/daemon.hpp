@@ -20,9 +20,10 @@
 #include "store/records.hpp"
 
 namespace imubridge::pipeline {
+class EstimationStage;
 class SessionEngine;
 class SessionSink;
-}
+}  // namespace imubridge::pipeline
 
 namespace imubridge::daemon {
 
@@ -85,6 +86,8 @@ class Daemon {
   void on_data(Link& link, std::span<const std::uint8_t> bytes);
   void write_to_link(Link& link, std::span<const std::uint8_t> bytes);
   void use_decoders();
+  // The engine's stage: the daemon's engine always estimates (without parameters, the specific force alone).
+  pipeline::EstimationStage& stage();
 
   void wait_for_signal();
   void reload();

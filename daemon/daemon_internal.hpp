@@ -17,7 +17,7 @@
 #include "daemon/serial_link.hpp"
 #include "daemon/vehicle_feedback.hpp"
 #include "pipeline/link_decoder.hpp"
-#include "pipeline/link_recorder.hpp"
+#include "pipeline/record_and_decode.hpp"
 #include "pipeline/session_engine.hpp"
 #include "store/store.hpp"
 
@@ -69,7 +69,7 @@ struct Daemon::Link {
   std::unique_ptr<LinkBridge> bridge;
   std::optional<VehicleFeedback> feedback;
   std::int64_t store_link = 0;  // in the current recording; also the link id of its samples while not recording
-  std::unique_ptr<pipeline::LinkRecorder> recorder;          // while recording
+  std::optional<pipeline::RecordAndDecode> recorder;         // while recording: stores what it decodes
   std::unique_ptr<pipeline::LinkDecoder> decoder;            // while not: the samples still reach estimates and outputs
   std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;

@@ -87,10 +87,10 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
   for (std::size_t i = 0; i < links_.size(); ++i) {
     links_[i]->retire_decoder();
     links_[i]->store_link = begun.store_links[i];
-    links_[i]->recorder = std::move(begun.recorders[i]);
+    links_[i]->recorder.emplace(std::move(begun.recorders[i]));
   }
   // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
-  engine_->replace_stage(std::make_unique<pipeline::EstimationStage>(params_, *engine_->stage().axes()));
+  engine_->replace_stage(std::make_unique<pipeline::EstimationStage>(params_, *stage().axes()));
   spdlog::info("recording session {} into {}{}{}", r->session, path.string(),
                config_.params ? " with parameters from " + config_.params->string()
                               : " (no parameters: velocity is not estimated)",
@@ -111,8 +111,8 @@ void Daemon::close_recording() {
       tail.clear();
       link->decoding->finish(mono, wall, tail);
       std::vector<store::Estimate> estimates;
-      for (const auto& sample : tail) engine_->stage().update(sample, estimates);
-      engine_->stage().finish(estimates);  // links still waiting for their axes
+      for (const auto& sample : tail) stage().update(sample, estimates);
+      stage().finish(estimates);  // links still waiting for their axes
       for (const auto& estimate : estimates) r->store.append_estimate(r->run, estimate);
     }
     pipeline::end_recorded_session(r->store, r->session, wall);

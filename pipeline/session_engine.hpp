@@ -3,7 +3,8 @@
 // with its serial links, replay with a session's recorded chunks) hands the engine each chunk as it comes; the
 // engine decodes it with the link's decoding, estimates every sample (EstimationStage) and gives bytes, samples and
 // estimates to each sink in the order the sinks were added. What differs between live and replay is only where
-// chunks come from and which sinks listen: the store, the network outputs, the vehicle feedback, the bridge.
+// chunks come from and which sinks listen: the store, the network outputs, the vehicle feedback, the bridge. Writers
+// without parameters (`sim --db`, the imports) run it without a stage: decoding (and recording) only.
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -17,8 +18,8 @@
 
 namespace imubridge::pipeline {
 
-// How a link's chunks become samples: a LinkDecoder (DecodeOnly), or the daemon's recording link, whose
-// LinkRecorder also stores what it decodes.
+// How a link's chunks become samples: a LinkDecoder (DecodeOnly), or a LinkRecorder that also stores what it
+// decodes (RecordAndDecode, pipeline/record_and_decode.hpp).
 class ChunkDecoding {
  public:
   virtual ~ChunkDecoding() = default;
@@ -63,14 +64,17 @@ class SessionSink {
 
 class SessionEngine {
  public:
+  // Without a stage (nullptr) the engine decodes only: sinks get every chunk and sample as with one, but no sample
+  // carries an estimate and on_final_estimates gets an empty list. For writers that record and keep no estimates.
   explicit SessionEngine(std::unique_ptr<EstimationStage> stage);
 
   // Sinks are not owned, and are called in the order they were added.
   void add_sink(SessionSink& sink);
   void remove_sink(const SessionSink& sink);
-  // A fresh stage, for link ids that changed (a new recording numbers its links anew).
+  // A fresh stage, for link ids that changed (a new recording numbers its links anew); nullptr to decode only.
   void replace_stage(std::unique_ptr<EstimationStage> stage);
-  EstimationStage& stage() { return *stage_; }
+  // The stage, or nullptr when the engine decodes only.
+  EstimationStage* stage() { return stage_.get(); }
 
   // A chunk of link `link`, decoded by `decoding`: the sinks get its bytes, then each sample with its estimates.
   void on_chunk(std::size_t link, ChunkDecoding& decoding, std::span<const std::uint8_t> bytes,
@@ -83,7 +87,7 @@ class SessionEngine {
  private:
   void estimate(std::size_t link, std::int64_t mono_ns);
 
-  std::unique_ptr<EstimationStage> stage_;
+  std::unique_ptr<EstimationStage> stage_;  // nullptr: decode only
   std::vector<SessionSink*> sinks_;
   std::vector<protocol::Sample> samples_;   // of the chunk at hand: reused, so a chunk allocates nothing
   std::vector<store::Estimate> estimates_;  // of the sample at hand: reused likewise

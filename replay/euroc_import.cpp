@@ -7,9 +7,13 @@
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <stdexcept>
+#include <utility>
 
+#include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_engine.hpp"
 #include "protocol/imu_frame.hpp"
 #include "replay/position_derivative.hpp"
 
@@ -154,17 +158,18 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   std::vector<double> axes_t;  // the rows as read, for the gravity check
   std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
   // The session begins with the first usable row, so a file without one leaves nothing behind. The dataset's
-  // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row.
-  std::unique_ptr<pipeline::LinkRecorder> recorder;
+  // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row. The
+  // frames go through the session engine without estimation: an import has no parameters (a replay estimates).
+  pipeline::SessionEngine engine(nullptr);
+  std::optional<pipeline::RecordAndDecode> recording;
   std::int64_t link = 0, t0 = 0, last_t = 0;
   std::vector<std::uint8_t> bytes;
-  std::vector<protocol::Sample> samples;
   const std::string accel_beyond = "accel " + range_text(options.accel_lsb, "m/s^2");
   const std::string gyro_beyond = "gyro " + range_text(options.gyro_lsb, "rad/s");
   read_table(
       imu, {',', 0, 7, 7},
       [&](const TableRow& row) -> std::optional<std::string> {
-        if (!recorder) {
+        if (!recording) {
           t0 = row.t_ns;
           pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
               store,
@@ -176,7 +181,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                 .device = "EuRoC imu0, " + result.imu.path.string()}});
           result.session = recorded.id;
           link = recorded.store_links[0];
-          recorder = std::move(recorded.recorders[0]);
+          recording.emplace(std::move(recorded.recorders[0]));
         }
         const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
         const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
@@ -188,8 +193,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                                .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
                                .payload = calibration.to_counts(accel, gyro, {}, 0.0)},
                               bytes);
-        samples.clear();
-        recorder->on_chunk(bytes, row.t_ns, row.t_ns, samples);
+        engine.on_chunk(0, *recording, bytes, row.t_ns, row.t_ns);
         ++result.imu.rows;
         last_t = row.t_ns;
         axes_t.push_back(static_cast<double>(since_t0) * 1e-9);
@@ -199,9 +203,10 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         return std::nullopt;
       },
       result.imu.skipped);
-  if (!recorder) throw std::invalid_argument(no_rows_message(result.imu));
+  if (!recording) throw std::invalid_argument(no_rows_message(result.imu));
 
-  recorder->finish(last_t, last_t, samples);
+  engine.finish_link(0, *recording, last_t, last_t);
+  engine.finish();
   for (const auto& row : reference_rows) store.append_reference(result.session, row);
   record_lines(store, result.session, link, last_t, "import_skipped", result.imu.path, result.imu.skipped);
   record_lines(store, result.session, link, last_t, "import_clipped", result.imu.path, result.clipped);

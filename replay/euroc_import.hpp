@@ -1,8 +1,8 @@
 #pragma once
 // `imubridge import euroc`: an EuRoC/ASL dataset as a session of kind "import". The IMU rows are re-encoded as
-// imubridge frames and recorded through the LinkRecorder, so the session starts from bytes like any recorded one and
-// replays the same way; the reference trajectory goes to the reference table in the estimator's conventions (NED,
-// attitude body -> NED). Conventions, calibration and the clock: docs/replay.md.
+// imubridge frames and recorded through the session engine and its LinkRecorder, so the session starts from bytes
+// like any recorded one and replays the same way; the reference trajectory goes to the reference table in the
+// estimator's conventions (NED, attitude body -> NED). Conventions, calibration and the clock: docs/replay.md.
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -49,8 +49,8 @@ struct EurocImportResult {
   std::int64_t session = 0;
   ImportedFile imu;
   std::optional<ImportedFile> reference;
-  bool velocity_derived = false;  // the reference had positions only: velocity_from_positions() supplied it
-  LinesByReason clipped;          // IMU rows imported with a value clipped to the frame's range
+  bool velocity_derived = false;   // the reference had positions only: velocity_from_positions() supplied it
+  LinesByReason clipped;           // IMU rows imported with a value clipped to the frame's range
   estimator::AxesResolution axes;  // the declared axes checked against gravity in the imported rows
 };
 

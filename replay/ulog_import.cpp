@@ -9,9 +9,12 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
+#include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_engine.hpp"
 #include "protocol/imu_frame.hpp"
 #include "replay/euroc_import.hpp"
 #include "replay/ulog.hpp"
@@ -103,8 +106,8 @@ std::vector<ImuRow> from_accel_and_gyro(const ulog::Topic& accel_topic, const ul
       ++skipped["no accelerometer samples around it"];
       continue;
     }
-    const double f = static_cast<double>(row.t_us - accel[k].first) /
-                     static_cast<double>(accel[k + 1].first - accel[k].first);
+    const double f =
+        static_cast<double>(row.t_us - accel[k].first) / static_cast<double>(accel[k + 1].first - accel[k].first);
     for (int j = 0; j < 3; ++j) row.accel[j] = accel[k].second[j] + f * (accel[k + 1].second[j] - accel[k].second[j]);
     if (!finite(row.gyro)) {
       ++skipped["not a finite number"];
@@ -132,8 +135,8 @@ std::vector<store::ReferenceRow> reference_rows(const ulog::Log& log, std::map<s
   };
   std::vector<std::pair<std::uint64_t, Eigen::Quaterniond>> attitude;
   for (std::size_t i = 0; i < att_topic->size(); ++i) {
-    const Eigen::Quaterniond a(att_topic->value(i, (*q)[0]), att_topic->value(i, (*q)[1]),
-                               att_topic->value(i, (*q)[2]), att_topic->value(i, (*q)[3]));
+    const Eigen::Quaterniond a(att_topic->value(i, (*q)[0]), att_topic->value(i, (*q)[1]), att_topic->value(i, (*q)[2]),
+                               att_topic->value(i, (*q)[3]));
     const std::uint64_t t = att_topic->timestamp(i);
     if (!(std::abs(a.norm() - 1) <= 1e-2)) {  // also NaN: a filter not yet initialised
       ++skipped["attitude quaternion not of unit length"];
@@ -155,8 +158,8 @@ std::vector<store::ReferenceRow> reference_rows(const ulog::Log& log, std::map<s
       continue;
     }
     while (k + 1 < attitude.size() && attitude[k + 1].first < t) ++k;
-    if (attitude.empty() || t < attitude[k].first || (k + 1 < attitude.size() ? attitude[k + 1].first < t
-                                                                               : attitude[k].first != t)) {
+    if (attitude.empty() || t < attitude[k].first ||
+        (k + 1 < attitude.size() ? attitude[k + 1].first < t : attitude[k].first != t)) {
       ++skipped["no attitude around it"];
       continue;
     }
@@ -191,8 +194,7 @@ bool beyond_range(const std::array<double, 3>& si, double lsb) {
 }
 
 std::string level_name(std::uint8_t level) {
-  static const char* const kNames[] = {"emergency", "alert", "critical", "error",
-                                       "warning",   "notice", "info",    "debug"};
+  static const char* const kNames[] = {"emergency", "alert", "critical", "error", "warning", "notice", "info", "debug"};
   return level >= '0' && level <= '7' ? kNames[level - '0'] : "level " + std::to_string(level);
 }
 
@@ -200,11 +202,12 @@ nlohmann::json metadata(const ulog::Log& log, const UlogImportOptions& options, 
                         bool reference) {
   nlohmann::json topics = nlohmann::json::array();
   for (const auto& t : log.topics) {
-    topics.push_back({{"name", t.name}, {"multi_id", t.multi_id}, {"records", t.size()},
-                      {"appended_records", t.appended_records}});
+    topics.push_back(
+        {{"name", t.name}, {"multi_id", t.multi_id}, {"records", t.size()}, {"appended_records", t.appended_records}});
   }
   nlohmann::json changes = nlohmann::json::array();
-  for (const auto& c : log.param_changes) changes.push_back({{"after_us", c.after_us}, {"name", c.name}, {"value", c.value}});
+  for (const auto& c : log.param_changes)
+    changes.push_back({{"after_us", c.after_us}, {"name", c.name}, {"value", c.value}});
   return {{"import",
            {{"format", "ulog"},
             {"file", options.file.string()},
@@ -243,7 +246,7 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
   if (const ulog::Topic* combined = log.topic("sensor_combined"); combined && combined->size() > 0) {
     result.imu_source = "sensor_combined";
     rows = from_sensor_combined(*combined, result.skipped);
-  } else if (const ulog::Topic *accel = log.topic("sensor_accel"), *gyro = log.topic("sensor_gyro"); accel && gyro) {
+  } else if (const ulog::Topic* accel = log.topic("sensor_accel"), *gyro = log.topic("sensor_gyro"); accel && gyro) {
     result.imu_source = "sensor_accel+sensor_gyro";
     rows = from_accel_and_gyro(*accel, *gyro, result.skipped);
   }
@@ -261,7 +264,8 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
   result.damage = log.damage;
 
   // Both receive clocks are the ULog timestamp (µs since the flight controller booted) in ns, so samples, reference
-  // and events share one time line; the device clock is the same timestamp in µs.
+  // and events share one time line; the device clock is the same timestamp in µs. The frames go through the session
+  // engine without estimation: an import has no parameters (a replay estimates).
   const std::int64_t t0 = ns(rows.front().t_us);
   pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
       store,
@@ -273,10 +277,10 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
         .device = "PX4 " + result.imu_source + ", " + file}});
   result.session = recorded.id;
   const std::int64_t link = recorded.store_links[0];
-  std::unique_ptr<pipeline::LinkRecorder> recorder = std::move(recorded.recorders[0]);
+  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+  pipeline::SessionEngine engine(nullptr);
 
   std::vector<std::uint8_t> bytes;
-  std::vector<protocol::Sample> samples;
   std::vector<double> axes_t;
   std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
   for (const ImuRow& row : rows) {
@@ -286,8 +290,7 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
                            .device_time_us = row.t_us,
                            .payload = calibration.to_counts(row.accel, row.gyro, {}, 0.0)},
                           bytes);
-    samples.clear();
-    recorder->on_chunk(bytes, ns(row.t_us), ns(row.t_us), samples);
+    engine.on_chunk(0, recording, bytes, ns(row.t_us), ns(row.t_us));
     ++result.samples;
     axes_t.push_back(static_cast<double>(row.t_us - rows.front().t_us) * 1e-6);
     axes_accel.emplace_back(row.accel[0], row.accel[1], row.accel[2]);
@@ -297,13 +300,18 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
   result.first_us = rows.front().t_us;
   result.last_us = rows.back().t_us;
   std::int64_t end = ns(result.last_us);
-  recorder->finish(end, end, samples);
+  engine.finish_link(0, recording, end, end);
+  engine.finish();
   for (const auto& row : reference) store.append_reference(result.session, row);
 
   const auto event = [&](std::optional<std::int64_t> on, std::int64_t t, std::string kind, std::int64_t count,
                          std::string detail) {
-    store.append_event(result.session, {.link_id = on, .mono_ns = t, .wall_ns = t, .kind = std::move(kind),
-                                        .count = count, .detail = std::move(detail)});
+    store.append_event(result.session, {.link_id = on,
+                                        .mono_ns = t,
+                                        .wall_ns = t,
+                                        .kind = std::move(kind),
+                                        .count = count,
+                                        .detail = std::move(detail)});
     end = std::max(end, t);
   };
   for (const auto& s : log.strings) {

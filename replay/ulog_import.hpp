@@ -1,8 +1,8 @@
 #pragma once
 // `imubridge import ulog`: a PX4 ULog file as a session of kind "import", as `import euroc` does it: the raw IMU
-// (sensor_combined, else sensor_accel with sensor_gyro) re-encoded as imubridge frames through the LinkRecorder, the
-// vehicle's attitude and local position as the reference trajectory, logged strings and dropouts as events, the
-// parameters and info in the session's config. docs/replay.md, "PX4 ULog".
+// (sensor_combined, else sensor_accel with sensor_gyro) re-encoded as imubridge frames and recorded through the
+// session engine and its LinkRecorder, the vehicle's attitude and local position as the reference trajectory, logged
+// strings and dropouts as events, the parameters and info in the session's config. docs/replay.md, "PX4 ULog".
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -17,18 +17,18 @@ namespace imubridge::replay {
 struct UlogImportOptions {
   std::filesystem::path file;
   // The frames' resolution: +-164 m/s^2 (an MPU9250's +-16 g) and +-36 rad/s (its +-2000 deg/s) as int16 counts.
-  double accel_lsb = 5e-3;   // m/s^2 per count
-  double gyro_lsb = 1.1e-3;  // rad/s per count
+  double accel_lsb = 5e-3;       // m/s^2 per count
+  double gyro_lsb = 1.1e-3;      // rad/s per count
   std::string imu_axes = "frd";  // PX4 reports its IMU in the body's FRD axes
   bool reference = true;         // vehicle_attitude + vehicle_local_position into the reference table
 };
 
 struct UlogImportResult {
   std::int64_t session = 0;
-  std::string imu_source;              // "sensor_combined" or "sensor_accel+sensor_gyro"
-  std::uint64_t samples = 0;           // IMU samples imported
+  std::string imu_source;                        // "sensor_combined" or "sensor_accel+sensor_gyro"
+  std::uint64_t samples = 0;                     // IMU samples imported
   std::map<std::string, std::uint64_t> skipped;  // IMU records not imported, by reason
-  std::uint64_t clipped = 0;           // samples with a value clipped to the frame's range
+  std::uint64_t clipped = 0;                     // samples with a value clipped to the frame's range
   std::uint64_t reference_rows = 0;
   std::map<std::string, std::uint64_t> reference_skipped;
   std::uint64_t log_events = 0;
@@ -37,7 +37,7 @@ struct UlogImportResult {
   bool data_appended = false;
   std::uint64_t appended_messages = 0;
   std::uint64_t first_us = 0, last_us = 0;  // the first and last sample's ULog timestamps
-  std::optional<std::string> damage;   // the file was read up to damage: what and where
+  std::optional<std::string> damage;        // the file was read up to damage: what and where
   estimator::AxesResolution axes;
 };
 

@@ -2,13 +2,21 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "pipeline/record_and_decode.hpp"
+#include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "store/store.hpp"
 #include "tests/paper_params.hpp"
+#include "tests/temp_dir.hpp"
 
 namespace imubridge::pipeline {
 namespace {
@@ -64,7 +72,10 @@ TEST(SessionEngine, GivesEverySinkTheDecodedSamplesAndTheStagesEstimatesInOrder)
   engine.add_sink(first);
   engine.add_sink(second);
   std::int64_t t = 0;
-  for (const auto& chunk : chunks) engine.on_chunk(0, decoding, chunk, t += 1'000'000, t);
+  for (const auto& chunk : chunks) {
+    t += 1'000'000;
+    engine.on_chunk(0, decoding, chunk, t, t);
+  }
   engine.finish_link(0, decoding, t, t);
   engine.finish();
 
@@ -116,7 +127,83 @@ TEST(SessionEngine, ALinkWaitingForItsAxesReleasesItsEstimatesAtTheEnd) {
   EXPECT_TRUE(sink.estimates.empty());
   engine.finish();
   EXPECT_EQ(sink.final_estimates.size(),
-            sink.samples.size() - 2 * static_cast<std::size_t>(engine.stage().delay_samples()));
+            sink.samples.size() - 2 * static_cast<std::size_t>(engine.stage()->delay_samples()));
+}
+
+// Writers without parameters (sim --db, the imports) run the engine without a stage: the sinks get every chunk and
+// sample, and no estimate at all, not even the specific force a stage without parameters would give.
+TEST(SessionEngine, WithoutAStageGivesTheSinksEverySampleAndNoEstimate) {
+  const auto chunks = flight_chunks(2.0);
+  const auto run = [&](std::unique_ptr<EstimationStage> stage) {
+    LinkDecoder decoder(protocol::WireFormat::imubridge, 7, protocol::Calibration::reference_board());
+    DecodeOnly decoding(decoder);
+    std::vector<std::string> log;
+    Recorder sink("a", &log);
+    SessionEngine engine(std::move(stage));
+    engine.add_sink(sink);
+    std::int64_t t = 0;
+    for (const auto& chunk : chunks) {
+      t += 1'000'000;
+      engine.on_chunk(0, decoding, chunk, t, t);
+    }
+    engine.finish_link(0, decoding, t, t);
+    engine.finish();
+    EXPECT_EQ(log.back(), "a final");
+    return sink;
+  };
+  const Recorder estimated = run(std::make_unique<EstimationStage>(estimator::ModelParams{}));
+  ASSERT_GT(estimated.estimates.size(), 300u);  // what a stage, even one without parameters, makes of this flight
+
+  const Recorder decoded = run(nullptr);
+  ASSERT_EQ(decoded.samples.size(), estimated.samples.size());
+  ASSERT_GT(decoded.samples.size(), 300u);
+  for (std::size_t i = 0; i < decoded.samples.size(); ++i) {
+    EXPECT_EQ(decoded.samples[i].seq, estimated.samples[i].seq);
+    EXPECT_EQ(decoded.samples[i].accel, estimated.samples[i].accel);
+  }
+  EXPECT_EQ(decoded.bytes, estimated.bytes);
+  EXPECT_TRUE(decoded.estimates.empty());
+  EXPECT_TRUE(decoded.final_estimates.empty());
+  EXPECT_EQ(SessionEngine(nullptr).stage(), nullptr);
+}
+
+// sim --db and the imports: a recorded session through RecordAndDecode and an engine without a stage stores every
+// chunk and every sample the sinks saw, and no run.
+TEST(SessionEngine, RecordingWithoutAStageStoresChunksAndSamplesAndNoRun) {
+  const auto chunks = flight_chunks(1.0);
+  test::TempDir dir;
+  store::Store store(dir / "s.db");
+  RecordedSession recorded = begin_recorded_session(
+      store, {.kind = "sim", .source = "test", .config = nlohmann::json::object()},
+      {{.recorded = {"imu0", protocol::WireFormat::imubridge, protocol::Calibration::reference_board(), "frd"},
+        .device = "test"}});
+  RecordAndDecode recording(std::move(recorded.recorders[0]));
+  std::vector<std::string> log;
+  Recorder sink("a", &log);
+  SessionEngine engine(nullptr);
+  engine.add_sink(sink);
+  std::int64_t t = 0;
+  for (const auto& chunk : chunks) {
+    t += 1'000'000;
+    engine.on_chunk(0, recording, chunk, t, t);
+  }
+  engine.finish_link(0, recording, t, t);
+  engine.finish();
+  end_recorded_session(store, recorded.id, t);
+
+  std::size_t stored_chunks = 0;
+  std::vector<protocol::Sample> stored;
+  store.for_each_chunk(recorded.id, std::nullopt, [&](const store::Chunk&) { ++stored_chunks; });
+  store.for_each_sample(recorded.id, std::nullopt, [&](const protocol::Sample& s) { stored.push_back(s); });
+  EXPECT_EQ(stored_chunks, chunks.size());
+  ASSERT_EQ(stored.size(), sink.samples.size());
+  ASSERT_GT(stored.size(), 150u);
+  for (std::size_t i = 0; i < stored.size(); ++i) EXPECT_EQ(stored[i].seq, sink.samples[i].seq);
+  std::uint64_t frames = 0;
+  for (const auto& [layer, counters] : recording.decoder().counters()) frames += counters.frames_out;
+  EXPECT_EQ(frames, stored.size());  // the recorder's own decoder decoded them
+  EXPECT_TRUE(sink.estimates.empty());
+  EXPECT_TRUE(store.runs(recorded.id).empty());
 }
 
 TEST(SessionEngine, ARemovedSinkHearsNothingMore) {

@@ -13,12 +13,15 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
 #include "estimator/imu_axes.hpp"
+#include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_engine.hpp"
 #include "protocol/calibration.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
@@ -108,14 +111,15 @@ nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
           {"rate_hz", config.imu.rate_hz}, {"effects", o.effects}, {"protocol", o.protocol}};
 }
 
-// The flight as a session: the bytes a ground station would have received, decoded by the same recorder the
-// daemon uses, with the simulator's truth as the session's reference trajectory.
+// The flight as a session: the bytes a ground station would have received, through the session engine and the
+// recorder the daemon uses, with the simulator's truth as the session's reference trajectory. The engine has no
+// estimation stage: sim has no parameters (a replay of the session estimates).
 int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   const auto format = protocol::parse_wire_format(o.protocol);
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
-  const pipeline::RecordedSession recorded =
+  pipeline::RecordedSession recorded =
       pipeline::begin_recorded_session(store,
                                        {.kind = "sim",
                                         .source = "imubridge sim " + describe(o, config).dump(),
@@ -124,17 +128,16 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
                                        {{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
                                          .device = "simulated IMU, scenario " + o.scenario}});
   const std::int64_t session = recorded.id;
-  pipeline::LinkRecorder& recorder = *recorded.recorders[0];
+  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+  pipeline::SessionEngine engine(nullptr);
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
-  std::vector<protocol::Sample> samples;
   std::int64_t last_ns = 0;
   sim::simulate(config, [&](const sim::SimSample& s) {
     last_ns = to_ns(s.time_s);
     bytes.clear();
-    samples.clear();
     encoder.encode(in_axes(s), bytes);
-    if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
+    if (!bytes.empty()) engine.on_chunk(0, recording, bytes, last_ns, start_wall + last_ns);
     const auto& q = s.truth.attitude;
     store.append_reference(
         session,
@@ -145,10 +148,10 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
     store.commit_if_due(Clock::now());
   });
   bytes.clear();
-  samples.clear();
   encoder.flush(bytes);
-  if (!bytes.empty()) recorder.on_chunk(bytes, last_ns, start_wall + last_ns, samples);
-  recorder.finish(last_ns, start_wall + last_ns, samples);
+  if (!bytes.empty()) engine.on_chunk(0, recording, bytes, last_ns, start_wall + last_ns);
+  engine.finish_link(0, recording, last_ns, start_wall + last_ns);
+  engine.finish();
   pipeline::end_recorded_session(store, session, wall_now_ns());
   std::fprintf(stderr, "recorded %s flight (%.1f s, seed %llu) into %s as session %lld\n", o.scenario.c_str(),
                config.duration_s, static_cast<unsigned long long>(o.seed), o.db.c_str(),
