@@ -132,15 +132,27 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       watchdog_timer_(io_),
       resume_timer_(io_) {
   signals_.add(SIGUSR1);
-  // Each link's declared IMU axes; XBee radios while not recording (pipeline::is_unrecorded_radio_id) take their
-  // link's. Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
+  // Each link's declared IMU axes, and an XBee radio takes the axes of the link it is heard through: while not
+  // recording its id says which (pipeline::is_unrecorded_radio_id); while recording it is a store link named after
+  // that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.
+  // Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
   pipeline::StageAxes axes;
   axes.declared = [this](std::uint32_t id) {
-    const std::size_t i =
-        pipeline::is_unrecorded_radio_id(id) ? pipeline::unrecorded_radio_link_index(id) : links_.size();
-    for (std::size_t k = 0; k < links_.size(); ++k) {
-      if (k == i || (i == links_.size() && links_[k]->store_link == static_cast<std::int64_t>(id))) {
-        return estimator::parse_imu_axes(links_[k]->config.axes);  // checked when the config was read
+    const auto axes_of = [](const Link& link) {
+      return estimator::parse_imu_axes(link.config.axes);  // checked when the config was read
+    };
+    if (pipeline::is_unrecorded_radio_id(id)) return axes_of(*links_.at(pipeline::unrecorded_radio_link_index(id)));
+    for (const auto& link : links_) {
+      if (link->store_link == static_cast<std::int64_t>(id)) return axes_of(*link);
+    }
+    if (recording_) {
+      for (const store::Link& stored : recording_->store.links(recording_->session)) {
+        if (stored.id != static_cast<std::int64_t>(id)) continue;
+        if (const auto radio = pipeline::parse_radio_link_name(stored.name)) {
+          for (const auto& link : links_) {
+            if (link->config.name == radio->link) return axes_of(*link);
+          }
+        }
       }
     }
     return estimator::auto_axes();
