@@ -52,6 +52,7 @@ struct LinkDecoder::Impl {
   std::uint32_t link_id;
   protocol::Calibration calibration;
   SourceResolver resolve_source;
+  std::optional<protocol::mavlink::ImuSource> mavlink_imu;
   std::variant<ImuLink, XbeeLink, MavlinkLink> link;
   std::uint64_t frames_without_sample = 0;
 
@@ -91,6 +92,7 @@ struct LinkDecoder::Impl {
     for (const auto& message : l.messages) {
       const std::uint64_t sequence = l.sequences.unwrap(message);
       auto sample = protocol::mavlink::to_sample(message, &calibration);
+      if (sample && mavlink_imu && protocol::mavlink::imu_source(message) != mavlink_imu) sample.reset();
       if (!sample) {
         ++frames_without_sample;
         continue;
@@ -104,8 +106,9 @@ struct LinkDecoder::Impl {
 };
 
 LinkDecoder::LinkDecoder(protocol::WireFormat format, std::uint32_t link_id, const protocol::Calibration& calibration,
-                         SourceResolver resolve_source)
-    : impl_(std::make_unique<Impl>(Impl{format, link_id, calibration, std::move(resolve_source), ImuLink{}, 0})) {
+                         SourceResolver resolve_source, std::optional<protocol::mavlink::ImuSource> mavlink_imu)
+    : impl_(std::make_unique<Impl>(
+          Impl{format, link_id, calibration, std::move(resolve_source), mavlink_imu, ImuLink{}, 0})) {
   if (!calibration.valid()) throw std::invalid_argument("invalid calibration (axis map, signs or scales)");
   switch (format) {
     case protocol::WireFormat::imubridge:

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -12,6 +13,7 @@
 
 #include "protocol/calibration.hpp"
 #include "protocol/decoder_counters.hpp"
+#include "protocol/mavlink.hpp"
 #include "protocol/sample.hpp"
 #include "protocol/wire_format.hpp"
 
@@ -23,8 +25,10 @@ class LinkDecoder {
   // its samples carry (the recorder makes one store link per radio). Without a resolver they all carry link_id.
   using SourceResolver = std::function<std::uint32_t(std::uint64_t source64)>;
 
+  // On a MAVLink link every IMU message gives a sample unless `mavlink_imu` names the one IMU to take samples from;
+  // the others' messages then count as frames without a sample, like ATTITUDE.
   LinkDecoder(protocol::WireFormat format, std::uint32_t link_id, const protocol::Calibration& calibration,
-              SourceResolver resolve_source = {});
+              SourceResolver resolve_source = {}, std::optional<protocol::mavlink::ImuSource> mavlink_imu = {});
   ~LinkDecoder();
   LinkDecoder(LinkDecoder&&) noexcept;
   LinkDecoder& operator=(LinkDecoder&&) noexcept;

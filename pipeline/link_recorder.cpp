@@ -16,20 +16,24 @@ protocol::DecoderCounters total(const LinkDecoder& decoder) {
 }  // namespace
 
 LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64_t link_id, std::string link_name,
-                           protocol::WireFormat format, const protocol::Calibration& calibration)
+                           protocol::WireFormat format, const protocol::Calibration& calibration,
+                           std::optional<protocol::mavlink::ImuSource> mavlink_imu)
     : store_(store),
       session_(session),
       link_id_(link_id),
       link_name_(std::move(link_name)),
       format_name_(protocol::wire_format_name(format)),
-      decoder_(format, static_cast<std::uint32_t>(link_id), calibration, [this](std::uint64_t source64) {
-        auto [it, added] = radio_links_.try_emplace(source64, 0);
-        if (added) {
-          it->second = store_.add_link(session_, radio_link_name(link_name_, source64), format_name_,
-                                       radio_link_description(link_name_, source64));
-        }
-        return static_cast<std::uint32_t>(it->second);
-      }) {}
+      decoder_(
+          format, static_cast<std::uint32_t>(link_id), calibration,
+          [this](std::uint64_t source64) {
+            auto [it, added] = radio_links_.try_emplace(source64, 0);
+            if (added) {
+              it->second = store_.add_link(session_, radio_link_name(link_name_, source64), format_name_,
+                                           radio_link_description(link_name_, source64));
+            }
+            return static_cast<std::uint32_t>(it->second);
+          },
+          mavlink_imu) {}
 
 void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns,
                             std::int64_t recv_wall_ns, std::vector<protocol::Sample>& samples) {

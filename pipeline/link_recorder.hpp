@@ -4,6 +4,7 @@
 // session always starts from bytes and replay can reproduce it.
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -16,8 +17,10 @@ namespace imubridge::pipeline {
 class LinkRecorder {
  public:
   // `link_id` is the store link of the port; XBee radios get links of their own (pipeline/radio_link.hpp).
+  // `mavlink_imu`: on a MAVLink link, the one IMU whose messages give samples (LinkDecoder).
   LinkRecorder(store::Store& store, std::int64_t session, std::int64_t link_id, std::string link_name,
-               protocol::WireFormat format, const protocol::Calibration& calibration);
+               protocol::WireFormat format, const protocol::Calibration& calibration,
+               std::optional<protocol::mavlink::ImuSource> mavlink_imu = {});
   LinkRecorder(const LinkRecorder&) = delete;  // the decoder's radio resolver points back at this recorder
   LinkRecorder& operator=(const LinkRecorder&) = delete;
 

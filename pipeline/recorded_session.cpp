@@ -24,8 +24,8 @@ RecordedSession begin_recorded_session(store::Store& store, const SessionStart& 
       const RecordedLink& r = link.recorded;
       session.store_links.push_back(
           store.add_link(session.id, r.name, protocol::wire_format_name(r.format), link.device));
-      session.recorders.push_back(std::make_unique<LinkRecorder>(store, session.id, session.store_links.back(),
-                                                                 r.name, r.format, r.calibration));
+      session.recorders.push_back(std::make_unique<LinkRecorder>(store, session.id, session.store_links.back(), r.name,
+                                                                 r.format, r.calibration, r.mavlink_imu));
     }
     if (start.estimated_with) {
       session.run = store.begin_run(session.id, {.kind = start.kind,

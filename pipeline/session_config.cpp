@@ -48,10 +48,18 @@ protocol::Calibration calibration_from_json(const json& j) {
 void add_recorded_links(json& config, const std::vector<RecordedLink>& links) {
   json& out = config["links"] = json::array();
   for (const auto& link : links) {
-    out.push_back({{"name", link.name},
-                   {"protocol", protocol::wire_format_name(link.format)},
-                   {"calibration", calibration_to_json(link.calibration)},
-                   {"imu_axes", link.imu_axes}});
+    json& j = out.emplace_back(json{{"name", link.name},
+                                    {"protocol", protocol::wire_format_name(link.format)},
+                                    {"calibration", calibration_to_json(link.calibration)},
+                                    {"imu_axes", link.imu_axes}});
+    if (const auto& imu = link.mavlink_imu) {
+      const protocol::mavlink::MessageSpec* spec = protocol::mavlink::message_spec(imu->msgid);
+      j["mavlink_imu"] = {{"message", spec ? spec->name : ""},  // for people; msgid is what is read back
+                          {"msgid", imu->msgid},
+                          {"sysid", imu->sysid},
+                          {"compid", imu->compid},
+                          {"id", imu->id}};
+    }
   }
 }
 
@@ -63,10 +71,16 @@ std::vector<RecordedLink> recorded_links(const std::string& session_config_json)
   std::vector<RecordedLink> links;
   for (const auto& j : config["links"]) {
     try {
-      links.push_back({j.at("name").get<std::string>(),
-                       protocol::parse_wire_format(j.at("protocol").get<std::string>()),
-                       calibration_from_json(j.at("calibration")),
-                       j.value("imu_axes", std::string("auto"))});
+      RecordedLink& link = links.emplace_back(RecordedLink{
+          j.at("name").get<std::string>(), protocol::parse_wire_format(j.at("protocol").get<std::string>()),
+          calibration_from_json(j.at("calibration")), j.value("imu_axes", std::string("auto"))});
+      if (j.contains("mavlink_imu")) {
+        const json& imu = j.at("mavlink_imu");
+        link.mavlink_imu = protocol::mavlink::ImuSource{.msgid = imu.at("msgid").get<std::uint32_t>(),
+                                                        .sysid = imu.at("sysid").get<std::uint8_t>(),
+                                                        .compid = imu.at("compid").get<std::uint8_t>(),
+                                                        .id = imu.at("id").get<std::uint8_t>()};
+      }
     } catch (const json::exception& e) {
       throw std::invalid_argument(std::string("session config, links: ") + e.what());
     }

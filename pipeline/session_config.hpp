@@ -3,11 +3,12 @@
 // that turned its counts into SI values. Every writer of sessions (the daemon, the simulator, imports) puts this
 // under "links" in the session's config snapshot, and replay reads it back from there.
 #include <nlohmann/json.hpp>
-
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "protocol/calibration.hpp"
+#include "protocol/mavlink.hpp"
 #include "protocol/wire_format.hpp"
 
 namespace imubridge::pipeline {
@@ -19,13 +20,17 @@ struct RecordedLink {
   // How the IMU's axes sit in the body (estimator::parse_imu_axes spelling). Sessions recorded before it was kept
   // read back as "auto": detect from gravity.
   std::string imu_axes = "auto";
+  // A MAVLink link's one IMU (LinkDecoder): set by imports of MAVLink logs, where several IMUs may be present.
+  // Absent: every IMU message gives samples, as on a live link.
+  std::optional<protocol::mavlink::ImuSource> mavlink_imu{};
 };
 
 nlohmann::json calibration_to_json(const protocol::Calibration& c);
 // Throws std::invalid_argument naming the bad field.
 protocol::Calibration calibration_from_json(const nlohmann::json& j);
 
-// {"links": [{"name": .., "protocol": .., "calibration": {..}, "imu_axes": ..}, ...]} merged into `config`.
+// {"links": [{"name": .., "protocol": .., "calibration": {..}, "imu_axes": .., "mavlink_imu": {"message": ..,
+// "msgid": .., "sysid": .., "compid": .., "id": ..} when set}, ...]} merged into `config`.
 void add_recorded_links(nlohmann::json& config, const std::vector<RecordedLink>& links);
 // Throws std::invalid_argument when the snapshot has no usable "links".
 std::vector<RecordedLink> recorded_links(const std::string& session_config_json);

@@ -80,7 +80,8 @@ Sample sample_of(const HighresImu& m) {
   return s;
 }
 
-Sample sample_of(const ScaledImu& m) {
+template <std::uint32_t Id>
+Sample sample_of(const ScaledImuOf<Id>& m) {
   Sample s;
   s.device_time_us = std::int64_t{m.time_boot_ms} * 1000;
   // mG are thousandths of standard gravity.
@@ -147,6 +148,34 @@ void Decoder::feed(std::span<const std::uint8_t> chunk, std::vector<Message>& ou
 
 void Decoder::finish(std::vector<Message>& out) { scanner_.finish(out); }
 
+namespace {
+
+// The checks after the header's, for a candidate `c` that holds its whole header `h` and whose id has `spec`.
+FrameCheck check_known(std::span<const std::uint8_t> c, const Header& h, const MessageSpec& spec) {
+  using Status = FrameCheck::Status;
+  const std::size_t size = h.frame_size();
+  // A MAVLink 1 frame carries the base fields, perhaps the extensions, never more. MAVLink 2 lengths are not
+  // checked: a newer sender may append extensions the table does not know yet, and its frames verify all the same.
+  if (h.version == 1 && (h.len < spec.min_length || h.len > spec.max_length)) return {Status::malformed, size};
+  if (c.size() < size) return {Status::cut_short, size};
+  const std::size_t crc_at = h.size + h.len;
+  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast(c.subspan(1, crc_at - 1)), spec.crc_extra);
+  return {crc == load_le<std::uint16_t>(&c[crc_at]) ? Status::frame : Status::bad_crc, size};
+}
+
+}  // namespace
+
+FrameCheck check_frame(std::span<const std::uint8_t> c) {
+  using Status = FrameCheck::Status;
+  if (c.empty() || (c[0] != kStxV1 && c[0] != kStxV2)) return {Status::malformed};
+  if (c.size() < (c[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {Status::cut_short};
+  const Header h = Header::read(c.data());
+  if (h.incompat_flags & ~kIncompatSigned) return {Status::malformed};  // a feature we cannot parse
+  const MessageSpec* spec = message_spec(h.msgid);
+  if (!spec) return {c.size() < h.frame_size() ? Status::cut_short : Status::unverified, h.frame_size()};
+  return check_known(c, h, *spec);
+}
+
 // Each verdict depends on the candidate's bytes only, so the chunking of the stream cannot change it.
 inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /*at_end*/) const {
   if (c.size() < (c[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {Verdict::need_more};
@@ -154,14 +183,19 @@ inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /
   if (h.incompat_flags & ~kIncompatSigned) return {Verdict::false_start};  // a feature we cannot parse
   const MessageSpec* spec = message_spec(h.msgid);
   if (!spec) return {Verdict::unverified};  // without its CRC_EXTRA no CRC can be checked
-  // A MAVLink 1 frame carries the base fields, perhaps the extensions, never more. MAVLink 2 lengths are not
-  // checked: a newer sender may append extensions the table does not know yet, and its frames verify all the same.
-  if (h.version == 1 && (h.len < spec->min_length || h.len > spec->max_length)) return {Verdict::false_start};
-  const std::size_t size = h.frame_size();
-  if (c.size() < size) return {Verdict::need_more};
-  const std::size_t crc_at = h.size + h.len;
-  const std::uint16_t crc = crc16_mcrf4xx_update(crc16_mcrf4xx_fast(c.subspan(1, crc_at - 1)), spec->crc_extra);
-  return {crc == load_le<std::uint16_t>(&c[crc_at]) ? Verdict::frame : Verdict::bad_crc, size};
+  const FrameCheck check = check_known(c, h, *spec);
+  switch (check.status) {
+    case FrameCheck::Status::frame:
+      return {Verdict::frame, check.size};
+    case FrameCheck::Status::bad_crc:
+      return {Verdict::bad_crc, check.size};
+    case FrameCheck::Status::cut_short:
+      return {Verdict::need_more};
+    case FrameCheck::Status::unverified:
+    case FrameCheck::Status::malformed:
+      break;
+  }
+  return {Verdict::false_start};
 }
 
 inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<Message>& out,
@@ -214,12 +248,36 @@ std::optional<Sample> to_sample(const Message& m, const Calibration* raw_calibra
   std::optional<Sample> s;
   if (const auto* highres = std::get_if<HighresImu>(&*decoded)) s = sample_of(*highres);
   if (const auto* scaled = std::get_if<ScaledImu>(&*decoded)) s = sample_of(*scaled);
+  if (const auto* scaled = std::get_if<ScaledImu2>(&*decoded)) s = sample_of(*scaled);
+  if (const auto* scaled = std::get_if<ScaledImu3>(&*decoded)) s = sample_of(*scaled);
   if (const auto* raw = std::get_if<RawImu>(&*decoded); raw && raw_calibration) s = sample_of(*raw, *raw_calibration);
   if (s) {
     s->seq = m.seq;
     s->clock_epoch = m.clock_epoch;
   }
   return s;
+}
+
+std::optional<ImuSource> imu_source(const Message& m) {
+  const std::optional<Decoded> decoded = decode(m);
+  if (!decoded) return std::nullopt;
+  ImuSource source{.msgid = m.msgid, .sysid = m.sysid, .compid = m.compid};
+  if (const auto* highres = std::get_if<HighresImu>(&*decoded)) {
+    source.id = highres->id;
+  } else if (const auto* raw = std::get_if<RawImu>(&*decoded)) {
+    source.id = raw->id;
+  } else if (!std::holds_alternative<ScaledImu>(*decoded) && !std::holds_alternative<ScaledImu2>(*decoded) &&
+             !std::holds_alternative<ScaledImu3>(*decoded)) {
+    return std::nullopt;
+  }
+  return source;
+}
+
+std::string describe(const ImuSource& source) {
+  const MessageSpec* spec = message_spec(source.msgid);
+  std::string text = spec ? std::string(spec->name) : "message " + std::to_string(source.msgid);
+  if (source.msgid == HighresImu::kId || source.msgid == RawImu::kId) text += " id " + std::to_string(source.id);
+  return text + " from system " + std::to_string(source.sysid) + ", component " + std::to_string(source.compid);
 }
 
 }  // namespace imubridge::protocol::mavlink

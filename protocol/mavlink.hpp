@@ -7,6 +7,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <span>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -55,6 +56,22 @@ Message make_message(const Decoded& message, const FrameOptions& options);
 // can check anyway: Decoder counts such a frame as unverified).
 void encode(const Message& m, std::vector<std::uint8_t>& out);
 
+// What the bytes at the start of `bytes` are, judged as Decoder judges a candidate, for a reader that knows where
+// frames start (a log of frames, each with its own framing). `size` is the frame's length as its header gives it,
+// once the header is whole: for `frame` and `unverified` the bytes the frame takes.
+struct FrameCheck {
+  enum class Status {
+    frame,       // a frame that passed every check
+    unverified,  // well formed, but its id has no CRC_EXTRA here, so nothing could check it
+    bad_crc,     // a known id whose CRC does not match
+    malformed,   // no STX, an incompat flag this decoder cannot parse, or a MAVLink 1 length its message cannot have
+    cut_short,   // the bytes end before the header or the frame does
+  };
+  Status status = Status::malformed;
+  std::size_t size = 0;
+};
+FrameCheck check_frame(std::span<const std::uint8_t> bytes);
+
 inline std::optional<Decoded> decode(const Message& m) {
   return decode_payload(m.msgid, std::span(m.payload).first(m.len));
 }
@@ -95,9 +112,24 @@ class Decoder {
 // hex instead of a name and fields.
 void to_json(nlohmann::json& j, const Message& m);
 
-// HIGHRES_IMU, SCALED_IMU, and RAW_IMU given the IMU's calibration, as a Sample in SI units; nothing for other
-// messages (ATTITUDE included) or for RAW_IMU without a calibration. seq is the 8-bit wire number; link_id and
-// recv_mono_ns are the caller's to fill.
+// HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, and RAW_IMU given the IMU's calibration, as a Sample in SI
+// units; nothing for other messages (ATTITUDE included) or for RAW_IMU without a calibration. seq is the 8-bit wire
+// number; link_id and recv_mono_ns are the caller's to fill.
 std::optional<Sample> to_sample(const Message& m, const Calibration* raw_calibration);
+
+// Which IMU a message to_sample converts measures: its sender (system and component), its message (SCALED_IMU,
+// SCALED_IMU2 and SCALED_IMU3 are an autopilot's first, second and third IMU) and, for HIGHRES_IMU and RAW_IMU, which
+// carry the IMUs of a sender in one message, their `id` field. A link that interleaved two of them would give one
+// sample stream of two sensors; pipeline::LinkDecoder can keep one (docs/replay.md, "MAVLink telemetry logs").
+struct ImuSource {
+  std::uint32_t msgid = 0;
+  std::uint8_t sysid = 0, compid = 0;
+  std::uint8_t id = 0;  // HIGHRES_IMU's and RAW_IMU's id field; 0 for the SCALED_IMUs
+  friend auto operator<=>(const ImuSource&, const ImuSource&) = default;
+};
+// The IMU `m` measures; nothing for a message that is not an IMU message to_sample converts.
+std::optional<ImuSource> imu_source(const Message& m);
+// "SCALED_IMU2 from system 1, component 1", "HIGHRES_IMU id 1 from system 1, component 1".
+std::string describe(const ImuSource& source);
 
 }  // namespace imubridge::protocol::mavlink

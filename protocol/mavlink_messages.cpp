@@ -17,8 +17,41 @@ constexpr std::size_t fields_size() {
   M::for_each_field(m, [&](std::string_view, const auto& field) { size += sizeof field; });
   return size;
 }
-static_assert(fields_size<HighresImu>() == HighresImu::kLength && fields_size<ScaledImu>() == ScaledImu::kLength &&
-              fields_size<RawImu>() == RawImu::kLength && fields_size<Attitude>() == Attitude::kLength);
+template <typename... M>
+constexpr bool sizes_agree(std::type_identity<std::variant<M...>>) {
+  return ((fields_size<M>() == M::kLength) && ...);
+}
+static_assert(sizes_agree(std::type_identity<Decoded>{}));
+
+template <typename T>
+struct IsArray : std::false_type {};
+template <typename T, std::size_t N>
+struct IsArray<std::array<T, N>> : std::true_type {};
+
+// A scalar field, or each element of an array field in turn.
+template <typename T>
+void load_field(T& field, const std::uint8_t* p) {
+  if constexpr (IsArray<T>::value) {
+    for (auto& element : field) {
+      element = load_le<std::remove_reference_t<decltype(element)>>(p);
+      p += sizeof element;
+    }
+  } else {
+    field = load_le<T>(p);
+  }
+}
+
+template <typename T>
+void store_field(std::uint8_t* p, const T& field) {
+  if constexpr (IsArray<T>::value) {
+    for (const auto& element : field) {
+      store_le(p, element);
+      p += sizeof element;
+    }
+  } else {
+    store_le(p, field);
+  }
+}
 
 template <typename M>
 M read(std::span<const std::uint8_t> payload) {
@@ -27,7 +60,7 @@ M read(std::span<const std::uint8_t> payload) {
   M m;
   std::size_t at = 0;
   M::for_each_field(m, [&](std::string_view, auto& field) {
-    field = load_le<std::remove_reference_t<decltype(field)>>(&bytes[at]);
+    load_field(field, &bytes[at]);
     at += sizeof field;
   });
   return m;
@@ -73,7 +106,7 @@ std::vector<std::uint8_t> encode_payload(const Decoded& message, bool extensions
         std::vector<std::uint8_t> out(M::kLength);
         std::size_t at = 0;
         M::for_each_field(m, [&](std::string_view, const auto& field) {
-          store_le(&out[at], field);
+          store_field(&out[at], field);
           at += sizeof field;
         });
         out.resize(extensions ? M::kLength : M::kBaseLength);

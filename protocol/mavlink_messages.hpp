@@ -1,6 +1,7 @@
 #pragma once
 // The MAVLink messages imubridge reads, as common.xml defines them, and the CRC_EXTRA of every common.xml message.
 // Payload layouts only: framing is protocol/mavlink.hpp. Units and conversion to samples: docs/protocol.md.
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -30,7 +31,8 @@ std::optional<std::uint8_t> crc_extra(std::uint32_t msgid);
 
 // Each message lists its fields in wire order through for_each_field(m, f), which calls f(name, field): MAVLink
 // sorts the base fields by type size (stable), then appends the extension fields in definition order. Extension
-// fields read 0 when the sender left them out (MAVLink 1, or a sender that predates them).
+// fields read 0 when the sender left them out (MAVLink 1, or a sender that predates them). A field is a scalar or a
+// std::array of them (MAVLink's float[4] and the like).
 
 struct HighresImu {
   static constexpr std::uint32_t kId = 105;
@@ -61,9 +63,12 @@ struct HighresImu {
   friend bool operator==(const HighresImu&, const HighresImu&) = default;
 };
 
-struct ScaledImu {
-  static constexpr std::uint32_t kId = 26;
-  static constexpr std::string_view kName = "SCALED_IMU";
+// SCALED_IMU, SCALED_IMU2 and SCALED_IMU3: one layout for an autopilot's first, second and third IMU, told apart by
+// their message id.
+template <std::uint32_t Id>
+struct ScaledImuOf {
+  static constexpr std::uint32_t kId = Id;
+  static constexpr std::string_view kName = Id == 26 ? "SCALED_IMU" : Id == 116 ? "SCALED_IMU2" : "SCALED_IMU3";
   static constexpr std::size_t kBaseLength = 22, kLength = 24;
 
   std::uint32_t time_boot_ms = 0;
@@ -80,8 +85,11 @@ struct ScaledImu {
     f("xmag", m.xmag), f("ymag", m.ymag), f("zmag", m.zmag);
     f("temperature", m.temperature);
   }
-  friend bool operator==(const ScaledImu&, const ScaledImu&) = default;
+  friend bool operator==(const ScaledImuOf&, const ScaledImuOf&) = default;
 };
+using ScaledImu = ScaledImuOf<26>;
+using ScaledImu2 = ScaledImuOf<116>;
+using ScaledImu3 = ScaledImuOf<129>;
 
 struct RawImu {
   static constexpr std::uint32_t kId = 27;
@@ -125,8 +133,47 @@ struct Attitude {
   friend bool operator==(const Attitude&, const Attitude&) = default;
 };
 
+struct AttitudeQuaternion {
+  static constexpr std::uint32_t kId = 31;
+  static constexpr std::string_view kName = "ATTITUDE_QUATERNION";
+  static constexpr std::size_t kBaseLength = 32, kLength = 48;
+
+  std::uint32_t time_boot_ms = 0;
+  float q1 = 0, q2 = 0, q3 = 0, q4 = 0;               // w, x, y, z: body (FRD) -> NED; (1, 0, 0, 0) is level north
+  float rollspeed = 0, pitchspeed = 0, yawspeed = 0;  // rad/s
+  std::array<float, 4> repr_offset_q{};               // extension: a display offset (w, x, y, z), 0s if unsupported
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_boot_ms", m.time_boot_ms);
+    f("q1", m.q1), f("q2", m.q2), f("q3", m.q3), f("q4", m.q4);
+    f("rollspeed", m.rollspeed), f("pitchspeed", m.pitchspeed), f("yawspeed", m.yawspeed);
+    f("repr_offset_q", m.repr_offset_q);
+  }
+  friend bool operator==(const AttitudeQuaternion&, const AttitudeQuaternion&) = default;
+};
+
+struct LocalPositionNed {
+  static constexpr std::uint32_t kId = 32;
+  static constexpr std::string_view kName = "LOCAL_POSITION_NED";
+  static constexpr std::size_t kBaseLength = 28, kLength = 28;
+
+  std::uint32_t time_boot_ms = 0;
+  float x = 0, y = 0, z = 0;     // m, NED from the autopilot's local origin
+  float vx = 0, vy = 0, vz = 0;  // m/s, NED
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("time_boot_ms", m.time_boot_ms);
+    f("x", m.x), f("y", m.y), f("z", m.z);
+    f("vx", m.vx), f("vy", m.vy), f("vz", m.vz);
+  }
+  friend bool operator==(const LocalPositionNed&, const LocalPositionNed&) = default;
+};
+
 // The messages that get typed fields; every other id is carried as payload bytes only.
-using Decoded = std::variant<HighresImu, ScaledImu, RawImu, Attitude>;
+using Decoded =
+    std::variant<HighresImu, ScaledImu, ScaledImu2, ScaledImu3, RawImu, Attitude, AttitudeQuaternion, LocalPositionNed>;
 
 bool is_decoded(std::uint32_t msgid);
 

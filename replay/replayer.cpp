@@ -46,10 +46,10 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
       const auto radio = ids->find(pipeline::radio_link_name(link, source64));
       return radio == ids->end() ? kNoLink : static_cast<std::uint32_t>(radio->second);
     };
-    decoders.emplace(
-        port->second,
-        ReplayedLink{recorded.name, pipeline::LinkDecoder(recorded.format, static_cast<std::uint32_t>(port->second),
-                                                          recorded.calibration, std::move(resolve))});
+    decoders.emplace(port->second,
+                     ReplayedLink{recorded.name, pipeline::LinkDecoder(
+                                                     recorded.format, static_cast<std::uint32_t>(port->second),
+                                                     recorded.calibration, std::move(resolve), recorded.mavlink_imu)});
   }
   return decoders;
 }

@@ -128,6 +128,36 @@ const MessageDef kAttitudeDef{"ATTITUDE",
                                {"float", "pitchspeed"},
                                {"float", "yawspeed"}},
                               {}};
+// SCALED_IMU2 and SCALED_IMU3 are SCALED_IMU's fields under other names, so other CRC_EXTRAs.
+MessageDef renamed(const MessageDef& def, std::string_view name, std::uint32_t id) {
+  MessageDef copy = def;
+  copy.name = name;
+  copy.id = id;
+  return copy;
+}
+const MessageDef kScaledImu2Def = renamed(kScaledImuDef, "SCALED_IMU2", 116);
+const MessageDef kScaledImu3Def = renamed(kScaledImuDef, "SCALED_IMU3", 129);
+const MessageDef kAttitudeQuaternionDef{"ATTITUDE_QUATERNION",
+                                        31,
+                                        {{"uint32_t", "time_boot_ms"},
+                                         {"float", "q1"},
+                                         {"float", "q2"},
+                                         {"float", "q3"},
+                                         {"float", "q4"},
+                                         {"float", "rollspeed"},
+                                         {"float", "pitchspeed"},
+                                         {"float", "yawspeed"}},
+                                        {{"float[4]", "repr_offset_q"}}};
+const MessageDef kLocalPositionNedDef{"LOCAL_POSITION_NED",
+                                      32,
+                                      {{"uint32_t", "time_boot_ms"},
+                                       {"float", "x"},
+                                       {"float", "y"},
+                                       {"float", "z"},
+                                       {"float", "vx"},
+                                       {"float", "vy"},
+                                       {"float", "vz"}},
+                                      {}};
 // Two that exercise the rest of the rules: a field to re-order, MAVLink's own version type, and an array.
 const MessageDef kHeartbeatDef{"HEARTBEAT",
                                0,
@@ -208,11 +238,20 @@ std::uint8_t crc_extra_from_definition(const MessageDef& def) {
 }
 
 std::size_t payload_length(const std::vector<WireField>& fields, std::size_t count) {
-  return count == 0 ? 0 : fields[count - 1].offset + fields[count - 1].element_size;
+  return count == 0 ? 0
+                    : fields[count - 1].offset +
+                          fields[count - 1].element_size * std::max<std::size_t>(fields[count - 1].array_length, 1);
 }
 
-// A scalar field read straight from payload bytes, as JSON, to compare with what to_json made of the same field.
+// A field read straight from payload bytes, as JSON (an array as an array), to compare with what to_json made of it.
 nlohmann::json read_field(const WireField& f, const std::uint8_t* p) {
+  if (f.array_length) {
+    WireField element = f;
+    element.array_length = 0;
+    nlohmann::json elements = nlohmann::json::array();
+    for (std::size_t i = 0; i < f.array_length; ++i) elements.push_back(read_field(element, p + i * f.element_size));
+    return elements;
+  }
   std::uint64_t bits = 0;
   for (std::size_t i = 0; i < f.element_size; ++i) bits |= std::uint64_t{p[i]} << (8 * i);
   if (f.type == "float") return std::bit_cast<float>(static_cast<std::uint32_t>(bits));
@@ -230,7 +269,8 @@ TEST(MavlinkCrc, PublishedCheckValue) {
 
 TEST(MavlinkDefinitions, CrcExtraComputedFromTheDefinitions) {
   for (const MessageDef* def :
-       {&kHighresImuDef, &kScaledImuDef, &kRawImuDef, &kAttitudeDef, &kHeartbeatDef, &kParamValueDef}) {
+       {&kHighresImuDef, &kScaledImuDef, &kScaledImu2Def, &kScaledImu3Def, &kRawImuDef, &kAttitudeDef,
+        &kAttitudeQuaternionDef, &kLocalPositionNedDef, &kHeartbeatDef, &kParamValueDef}) {
     EXPECT_EQ(crc_extra(def->id), crc_extra_from_definition(*def)) << def->name;
   }
   EXPECT_EQ(crc_extra(0xABCDE), std::nullopt);
@@ -249,6 +289,10 @@ TEST(MavlinkDefinitions, TableAgreesWithMavlinksGeneratedHeaders) {
       {1, "SYS_STATUS", 124, 31, 43},                 // common.xml
       {24, "GPS_RAW_INT", 24, 30, 52},                // common.xml
       {26, "SCALED_IMU", 170, 22, 24},                // common.xml
+      {116, "SCALED_IMU2", 76, 22, 24},               // common.xml
+      {129, "SCALED_IMU3", 46, 22, 24},               // common.xml
+      {31, "ATTITUDE_QUATERNION", 246, 32, 48},       // common.xml
+      {32, "LOCAL_POSITION_NED", 185, 28, 28},        // common.xml
       {27, "RAW_IMU", 144, 26, 29},                   // common.xml
       {30, "ATTITUDE", 39, 28, 28},                   // common.xml
       {105, "HIGHRES_IMU", 93, 62, 63},               // common.xml
@@ -288,13 +332,19 @@ void expect_layout_matches(const MessageDef& def) {
   // Every field a different value, with every byte of it significant.
   M sent;
   std::uint64_t k = 0;
-  M::for_each_field(sent, [&k](std::string_view, auto& field) {
-    using T = std::remove_reference_t<decltype(field)>;
+  const auto distinct = [&k]<typename T>(T& scalar) {
     ++k;
     if constexpr (std::is_floating_point_v<T>) {
-      field = static_cast<T>(k) + 0.375f;
+      scalar = static_cast<T>(k) + 0.375f;
     } else {
-      field = static_cast<T>(0xF0E0D0C0B0A09080ull + k);
+      scalar = static_cast<T>(0xF0E0D0C0B0A09080ull + k);
+    }
+  };
+  M::for_each_field(sent, [&](std::string_view, auto& field) {
+    if constexpr (requires { field.size(); }) {
+      for (auto& element : field) distinct(element);
+    } else {
+      distinct(field);
     }
   });
   const Message m = make_message(sent, {.truncate = false});
@@ -308,8 +358,12 @@ void expect_layout_matches(const MessageDef& def) {
 TEST(MavlinkDefinitions, WireLayoutMatchesTheDefinitions) {
   expect_layout_matches<HighresImu>(kHighresImuDef);
   expect_layout_matches<ScaledImu>(kScaledImuDef);
+  expect_layout_matches<ScaledImu2>(kScaledImu2Def);
+  expect_layout_matches<ScaledImu3>(kScaledImu3Def);
   expect_layout_matches<RawImu>(kRawImuDef);
   expect_layout_matches<Attitude>(kAttitudeDef);
+  expect_layout_matches<AttitudeQuaternion>(kAttitudeQuaternionDef);
+  expect_layout_matches<LocalPositionNed>(kLocalPositionNedDef);
 }
 
 // ---- Framing ----
@@ -909,6 +963,83 @@ TEST(MavlinkSample, ScaledImuUnits) {
   ScaledImu no_temperature = m;
   no_temperature.temperature = 0;  // MAVLink's "not provided"
   EXPECT_FALSE(to_sample(make_message(no_temperature, {}), nullptr)->has_temperature);
+}
+
+// SCALED_IMU2 and SCALED_IMU3 are a second and third IMU in SCALED_IMU's units: mG, mrad/s, mgauss, cdegC.
+TEST(MavlinkSample, ScaledImu2AndScaledImu3InScaledImusUnits) {
+  const ScaledImu2 second{.time_boot_ms = 60'000,
+                          .xacc = 2000,
+                          .yacc = -3,
+                          .zacc = -998,
+                          .xgyro = -1500,
+                          .ygyro = 7,
+                          .zgyro = 0,
+                          .xmag = 250,
+                          .ymag = -4,
+                          .zmag = 1,
+                          .temperature = 1};
+  const Message m = make_message(second, {.seq = 3});
+  EXPECT_EQ(m.msgid, 116u);
+  const Bytes bytes = bytes_of(m);
+  const Decoding r = decode_stream(bytes);
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_EQ(r.counters.unsupported, 0u);
+  EXPECT_EQ(std::get<ScaledImu2>(decode(r.frames[0]).value()), second);
+  const auto s = to_sample(r.frames[0], nullptr);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->device_time_us, 60'000'000);
+  EXPECT_DOUBLE_EQ(s->accel[0], 2 * 9.80665);
+  EXPECT_DOUBLE_EQ(s->accel[1], -3 * 9.80665 / 1000);
+  EXPECT_DOUBLE_EQ(s->accel[2], -998 * 9.80665 / 1000);
+  EXPECT_DOUBLE_EQ(s->gyro[0], -1.5);
+  EXPECT_DOUBLE_EQ(s->gyro[1], 0.007);
+  EXPECT_DOUBLE_EQ(s->mag[0], 25.0);  // 250 mgauss = 25 uT
+  EXPECT_DOUBLE_EQ(s->mag[2], 0.1);
+  EXPECT_TRUE(s->has_temperature);
+  EXPECT_DOUBLE_EQ(s->temperature_c, 0.01);  // 0 degC is sent as 1
+  EXPECT_EQ(imu_source(m), (ImuSource{.msgid = 116, .sysid = 1, .compid = 1, .id = 0}));
+  EXPECT_EQ(describe(*imu_source(m)), "SCALED_IMU2 from system 1, component 1");
+
+  const ScaledImu3 third{.time_boot_ms = 5, .xacc = 1000};
+  const auto t = to_sample(make_message(third, {}), nullptr);
+  ASSERT_TRUE(t);
+  EXPECT_DOUBLE_EQ(t->accel[0], 9.80665);
+  EXPECT_EQ(nlohmann::json(make_message(third, {}))["name"], "SCALED_IMU3");
+}
+
+TEST(MavlinkSample, EachImuIsASource) {
+  HighresImu second_highres = kHighres;
+  second_highres.id = 1;
+  EXPECT_EQ(imu_source(make_message(second_highres, {.sysid = 2, .compid = 3})),
+            (ImuSource{.msgid = 105, .sysid = 2, .compid = 3, .id = 1}));
+  EXPECT_EQ(describe(*imu_source(make_message(second_highres, {}))), "HIGHRES_IMU id 1 from system 1, component 1");
+  EXPECT_EQ(imu_source(make_message(kRaw, {})), (ImuSource{.msgid = 27, .sysid = 1, .compid = 1, .id = kRaw.id}));
+  EXPECT_EQ(imu_source(make_message(kScaled, {})), (ImuSource{.msgid = 26, .sysid = 1, .compid = 1}));
+  EXPECT_EQ(imu_source(make_message(kAttitude, {})), std::nullopt);
+  EXPECT_EQ(imu_source(make_message(LocalPositionNed{}, {})), std::nullopt);
+}
+
+// What a reader of a log of frames gets for the bytes at a frame's start: the decoder's verdict on them.
+TEST(MavlinkFrame, CheckFrameJudgesAsTheDecoderDoes) {
+  using Status = FrameCheck::Status;
+  const Bytes frame = bytes_of(kScaled, {.seq = 1});
+  EXPECT_EQ(check_frame(frame).status, Status::frame);
+  EXPECT_EQ(check_frame(frame).size, frame.size());
+  Bytes longer = frame;
+  append(longer, bytes_of(kAttitude, {.seq = 2}));
+  EXPECT_EQ(check_frame(longer).size, frame.size());  // the first frame only
+  EXPECT_EQ(check_frame(std::span(frame).first(frame.size() - 1)).status, Status::cut_short);
+  EXPECT_EQ(check_frame(std::span(frame).first(3)).status, Status::cut_short);
+  Bytes flipped = frame;
+  flipped[12] ^= 0x10;
+  EXPECT_EQ(check_frame(flipped).status, Status::bad_crc);
+  EXPECT_EQ(check_frame(Bytes{0x00, 0x01}).status, Status::malformed);
+  EXPECT_EQ(check_frame(Bytes{}).status, Status::malformed);
+  Bytes unknown = bytes_of(make_message(kUnknownId, Bytes{1, 2, 3}, {}));
+  EXPECT_EQ(check_frame(unknown).status, Status::unverified);
+  EXPECT_EQ(check_frame(unknown).size, unknown.size());
+  EXPECT_EQ(check_frame(bytes_of(kHighres, {.version = 1})).status, Status::frame);
+  EXPECT_EQ(check_frame(bytes_of(kHighres, {.sign = true})).size, 10 + 63 + 2 + 13u);
 }
 
 TEST(MavlinkSample, RawImuGoesThroughTheCalibration) {

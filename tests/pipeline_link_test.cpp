@@ -83,6 +83,36 @@ INSTANTIATE_TEST_SUITE_P(Pipeline, EveryFormat,
                            return name;
                          });
 
+// Two IMUs on one MAVLink link: without a source every IMU message is a sample, the two sensors interleaved; with
+// one, only its messages are, and the other's count as frames without a sample.
+TEST(LinkDecoder, AMavlinkLinkCanKeepOneImu) {
+  namespace mav = protocol::mavlink;
+  std::vector<std::uint8_t> bytes;
+  std::uint8_t seq = 0;
+  for (std::uint32_t i = 0; i < 20; ++i) {
+    mav::encode(mav::make_message(mav::HighresImu{.time_usec = 1000 * i, .zacc = -9.8f}, {.seq = seq++}), bytes);
+    if (i % 4 == 0) {
+      mav::encode(mav::make_message(mav::ScaledImu2{.time_boot_ms = i, .zacc = -500}, {.seq = seq++}), bytes);
+    }
+  }
+  const auto decode = [&](std::optional<mav::ImuSource> source) {
+    LinkDecoder decoder(WireFormat::mavlink, 3, protocol::Calibration::reference_board(), {}, source);
+    std::vector<protocol::Sample> out;
+    decoder.feed(bytes, 1, out);
+    decoder.finish(2, out);
+    return std::pair(out, decoder.frames_without_sample());
+  };
+  EXPECT_EQ(decode(std::nullopt).first.size(), 25u);
+  const auto [highres, others] = decode(mav::ImuSource{.msgid = 105, .sysid = 1, .compid = 1, .id = 0});
+  ASSERT_EQ(highres.size(), 20u);
+  EXPECT_EQ(others, 5u);
+  for (const auto& s : highres) EXPECT_FLOAT_EQ(s.accel[2], -9.8f);
+  const auto [second, _] = decode(mav::ImuSource{.msgid = 116, .sysid = 1, .compid = 1, .id = 0});
+  ASSERT_EQ(second.size(), 5u);
+  EXPECT_DOUBLE_EQ(second[0].accel[2], -9.80665 / 2);
+  EXPECT_TRUE(decode(mav::ImuSource{.msgid = 116, .sysid = 2, .compid = 1, .id = 0}).first.empty());  // another sender
+}
+
 TEST(LinkDecoder, UnknownFormatNameIsAClearError) {
   EXPECT_THROW(protocol::parse_wire_format("ubx"), std::invalid_argument);
   EXPECT_EQ(protocol::parse_wire_format("xbee-escaped"), WireFormat::xbee_escaped);

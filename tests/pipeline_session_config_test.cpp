@@ -23,6 +23,18 @@ TEST(SessionConfig, LinksAndCalibrationsSurviveTheSnapshot) {
   EXPECT_EQ(links[0].calibration.gyro.scale, odd.gyro.scale);  // doubles survive JSON exactly (shortest round trip)
   EXPECT_EQ(links[0].calibration.temperature_offset_c, -3.5);
   EXPECT_EQ(links[1].format, protocol::WireFormat::mavlink);
+  EXPECT_EQ(links[1].mavlink_imu, std::nullopt);  // not written, read back as every IMU
+}
+
+TEST(SessionConfig, AMavlinkLinksImuSurvivesTheSnapshot) {
+  const protocol::mavlink::ImuSource source{.msgid = 116, .sysid = 1, .compid = 200, .id = 0};
+  nlohmann::json config;
+  add_recorded_links(config, {{"telemetry", protocol::WireFormat::mavlink, protocol::Calibration{}, "frd", source}});
+  EXPECT_EQ(config["links"][0]["mavlink_imu"]["message"], "SCALED_IMU2");
+  const auto links = recorded_links(config.dump());
+  ASSERT_EQ(links.size(), 1u);
+  EXPECT_EQ(links[0].mavlink_imu, source);
+  EXPECT_EQ(links[0].imu_axes, "frd");
 }
 
 TEST(SessionConfig, SnapshotsWithoutLinksOrWithBadCalibrationsAreRefused) {
