@@ -18,10 +18,9 @@ protocol::imu::Frame imu_frame(const SimSample& sample) {
   return frame;
 }
 
-void encode_mavlink(const SimSample& sample, std::uint8_t& seq, std::vector<std::uint8_t>& out) {
-  namespace mav = protocol::mavlink;
+protocol::mavlink::HighresImu highres_imu(const SimSample& sample) {
   const auto& m = sample.measured;
-  mav::HighresImu imu;
+  protocol::mavlink::HighresImu imu;
   imu.time_usec = static_cast<std::uint64_t>(std::llround(sample.time_s * 1e6));
   imu.xacc = static_cast<float>(m.accel.x()), imu.yacc = static_cast<float>(m.accel.y());
   imu.zacc = static_cast<float>(m.accel.z());
@@ -31,17 +30,42 @@ void encode_mavlink(const SimSample& sample, std::uint8_t& seq, std::vector<std:
   imu.zmag = static_cast<float>(m.mag.z() / 100.0);
   imu.temperature = static_cast<float>(m.temperature_c);
   imu.fields_updated = 0x1FF | (1u << 12);  // accel, gyro, mag, temperature
-  mav::encode(mav::make_message(imu, {.seq = seq++}), out);
-  if (sample.index % FrameEncoder::kAttitudeEvery == 0) {
-    const auto& truth = sample.truth;
-    mav::Attitude attitude;
-    attitude.time_boot_ms = static_cast<std::uint32_t>(std::llround(sample.time_s * 1e3));
-    attitude.roll = static_cast<float>(truth.euler.x()), attitude.pitch = static_cast<float>(truth.euler.y());
-    attitude.yaw = static_cast<float>(truth.euler.z());
-    attitude.rollspeed = static_cast<float>(truth.omega.x()), attitude.pitchspeed = static_cast<float>(truth.omega.y());
-    attitude.yawspeed = static_cast<float>(truth.omega.z());
-    mav::encode(mav::make_message(attitude, {.seq = seq++}), out);
-  }
+  return imu;
+}
+
+std::uint32_t time_boot_ms(const SimSample& sample) {
+  return static_cast<std::uint32_t>(std::llround(sample.time_s * 1e3));
+}
+
+protocol::mavlink::Attitude attitude(const SimSample& sample) {
+  const auto& truth = sample.truth;
+  protocol::mavlink::Attitude attitude;
+  attitude.time_boot_ms = time_boot_ms(sample);
+  attitude.roll = static_cast<float>(truth.euler.x()), attitude.pitch = static_cast<float>(truth.euler.y());
+  attitude.yaw = static_cast<float>(truth.euler.z());
+  attitude.rollspeed = static_cast<float>(truth.omega.x()), attitude.pitchspeed = static_cast<float>(truth.omega.y());
+  attitude.yawspeed = static_cast<float>(truth.omega.z());
+  return attitude;
+}
+
+protocol::mavlink::LocalPositionNed local_position(const SimSample& sample) {
+  const auto& p = sample.truth.position_ned;
+  const auto& v = sample.truth.velocity_ned;
+  return {.time_boot_ms = time_boot_ms(sample),
+          .x = static_cast<float>(p.x()),
+          .y = static_cast<float>(p.y()),
+          .z = static_cast<float>(p.z()),
+          .vx = static_cast<float>(v.x()),
+          .vy = static_cast<float>(v.y()),
+          .vz = static_cast<float>(v.z())};
+}
+
+bool sends_attitude(const SimSample& sample) { return sample.index % FrameEncoder::kAttitudeEvery == 0; }
+
+void encode_mavlink(const SimSample& sample, std::uint8_t& seq, std::vector<std::uint8_t>& out) {
+  namespace mav = protocol::mavlink;
+  mav::encode(mav::make_message(highres_imu(sample), {.seq = seq++}), out);
+  if (sends_attitude(sample)) mav::encode(mav::make_message(attitude(sample), {.seq = seq++}), out);
 }
 
 }  // namespace
@@ -77,6 +101,20 @@ void FrameEncoder::send_radio_packets(std::size_t keep_at_most, std::vector<std:
     sent += n;
   }
   radio_pending_.erase(radio_pending_.begin(), radio_pending_.begin() + static_cast<std::ptrdiff_t>(sent));
+}
+
+void MavlinkTelemetry::encode(const SimSample& sample, std::vector<std::vector<std::uint8_t>>& frames) {
+  frames.push_back(frame(highres_imu(sample)));
+  if (sends_attitude(sample)) {
+    frames.push_back(frame(attitude(sample)));
+    frames.push_back(frame(local_position(sample)));
+  }
+}
+
+std::vector<std::uint8_t> MavlinkTelemetry::frame(const protocol::mavlink::Decoded& message) {
+  std::vector<std::uint8_t> out;
+  protocol::mavlink::encode(protocol::mavlink::make_message(message, {.seq = seq_++}), out);
+  return out;
 }
 
 }  // namespace imubridge::sim

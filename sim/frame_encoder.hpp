@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "protocol/mavlink_messages.hpp"
 #include "protocol/wire_format.hpp"
 #include "sim/simulator.hpp"
 
@@ -29,6 +30,21 @@ class FrameEncoder {
   protocol::WireFormat format_;
   std::vector<std::uint8_t> radio_pending_;  // imubridge bytes the vehicle's XBee has not sent yet
   std::uint8_t mavlink_seq_ = 0;
+};
+
+// A flight controller's MAVLink telemetry as a ground station logs it, frame by frame (`imubridge sim --tlog`): the
+// HIGHRES_IMU of every sample and the ATTITUDE of every kAttitudeEvery-th, as FrameEncoder sends them, and with each
+// ATTITUDE a LOCAL_POSITION_NED of the truth (the mass centre's position and velocity, NED), so an import of the log
+// finds the trajectory the simulator flew. One sender, system 1 component 1, numbering its frames in one sequence.
+class MavlinkTelemetry {
+ public:
+  // Appends the frames this sample makes, each whole, to `frames`.
+  void encode(const SimSample& sample, std::vector<std::vector<std::uint8_t>>& frames);
+  // `message` as the sender's next frame (MAVLink 2).
+  std::vector<std::uint8_t> frame(const protocol::mavlink::Decoded& message);
+
+ private:
+  std::uint8_t seq_ = 0;
 };
 
 }  // namespace imubridge::sim

@@ -1,5 +1,5 @@
-// `imubridge import euroc|ulog`: an EuRoC/ASL dataset or a PX4 ULog file into a new session, from bytes like a
-// recorded flight, with its reference trajectory. docs/replay.md.
+// `imubridge import euroc|ulog|tlog`: an EuRoC/ASL dataset, a PX4 ULog file or a MAVLink telemetry log into a new
+// session, from bytes like a recorded flight, with its reference trajectory. docs/replay.md.
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <string>
@@ -7,6 +7,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config.hpp"
 #include "replay/euroc_import.hpp"
+#include "replay/tlog_import.hpp"
 #include "replay/ulog_import.hpp"
 
 namespace imubridge::cli {
@@ -18,6 +19,7 @@ struct ImportCommandOptions {
   double accel_lsb = replay::EurocImportOptions{}.accel_lsb;
   double gyro_lsb = replay::EurocImportOptions{}.gyro_lsb;
   std::string imu_axes = "auto";
+  std::string imu_message;
   bool no_reference = false;
   // Whether the user gave these: ulog has its own defaults for what was not given.
   bool imu_axes_given = false, accel_lsb_given = false, gyro_lsb_given = false;
@@ -32,6 +34,7 @@ void print_lines(const char* what, const replay::ImportedFile& file, const repla
 
 int run_import_ulog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a ULog file holds its own");
+  if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
   if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
   if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
@@ -76,9 +79,64 @@ int run_import_ulog(const ImportCommandOptions& o) {
   return 0;
 }
 
+int run_import_tlog(const ImportCommandOptions& o) {
+  if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a tlog holds its own");
+  replay::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
+  if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
+  if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
+  if (o.imu_axes_given) options.imu_axes = o.imu_axes;
+  if (!o.imu_message.empty()) options.imu_message = o.imu_message;
+  store::Store store(o.db);
+  const auto r = replay::import_tlog(store, options);
+  std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
+               static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
+               static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
+               static_cast<long long>(r.session));
+  std::fprintf(stderr, "%llu records, every frame kept as received%s\n", static_cast<unsigned long long>(r.records),
+               r.unverified > 0
+                   ? (" (" + std::to_string(r.unverified) + " of ids in no dialect known here, kept unchecked)").c_str()
+                   : "");
+  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
+  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
+  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
+  for (const auto& [reason, count] : r.skipped) {
+    std::fprintf(stderr, "skipped %llu IMU messages: %s\n", static_cast<unsigned long long>(count), reason.c_str());
+  }
+  if (r.clipped > 0) {
+    std::fprintf(stderr,
+                 "warning: %llu samples with a value at the end of its field's range (clipped by the sender?)\n",
+                 static_cast<unsigned long long>(r.clipped));
+  }
+  if (o.no_reference) {
+    std::fprintf(stderr, "no reference trajectory (--no-reference)\n");
+  } else if (r.reference_rows == 0) {
+    std::fprintf(stderr,
+                 "no reference trajectory (the log has no usable LOCAL_POSITION_NED with ATTITUDE_QUATERNION or "
+                 "ATTITUDE)\n");
+  } else {
+    std::fprintf(stderr, "reference: %llu rows (%s)\n", static_cast<unsigned long long>(r.reference_rows),
+                 r.reference_source.c_str());
+  }
+  for (const auto& [reason, count] : r.reference_skipped) {
+    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
+  }
+  std::fprintf(stderr, "events: %llu STATUSTEXT messages, %llu gaps in the log's time over %g s (%.1f s)%s\n",
+               static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.gaps),
+               static_cast<double>(replay::kTlogGapUs) * 1e-6, r.gap_s,
+               r.time_back > 0 ? (", its time stepped back " + std::to_string(r.time_back) + "x").c_str() : "");
+  if (r.damage) {
+    std::fprintf(stderr, "warning: %s is damaged: %s; every valid record is imported\n", o.dir.c_str(),
+                 r.damage->c_str());
+  }
+  std::printf("%lld\n", static_cast<long long>(r.session));
+  return 0;
+}
+
 int run_import(const ImportCommandOptions& o) {
   if (o.format == "ulog") return run_import_ulog(o);
-  if (o.no_reference) throw std::invalid_argument("--no-reference is for ulog");
+  if (o.format == "tlog") return run_import_tlog(o);
+  if (o.no_reference) throw std::invalid_argument("--no-reference is for ulog and tlog");
+  if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   replay::EurocImportOptions options{
       .dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb, .imu_axes = o.imu_axes};
   if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
@@ -107,8 +165,9 @@ int run_import(const ImportCommandOptions& o) {
 const RegisterCommand kImport([](CLI::App& app) -> CommandRunner {
   auto o = std::make_shared<ImportCommandOptions>();
   auto* cmd = app.add_subcommand("import", "Import a dataset as a new session (prints its id last)");
-  cmd->add_option("format", o->format, "Dataset format")->check(CLI::IsMember({"euroc", "ulog"}))->required();
-  cmd->add_option("dir", o->dir, "euroc: the dataset's directory (the one holding mav0/); ulog: the .ulg file")
+  cmd->add_option("format", o->format, "Dataset format")->check(CLI::IsMember({"euroc", "ulog", "tlog"}))->required();
+  cmd->add_option("dir", o->dir,
+                  "euroc: the dataset's directory (the one holding mav0/); ulog: the .ulg file; tlog: the .tlog file")
       ->required();
   auto* reference = cmd->add_option("--reference", o->reference,
                                     "Reference trajectory (default: mav0/state_groundtruth_estimate0/data.csv)");
@@ -117,26 +176,38 @@ const RegisterCommand kImport([](CLI::App& app) -> CommandRunner {
       ->needs(reference)
       ->capture_default_str();
   cmd->add_flag("--no-reference", o->no_reference,
-                "ulog: leave out the reference trajectory (vehicle_attitude + vehicle_local_position)");
+                "ulog, tlog: leave out the reference trajectory (vehicle_attitude + vehicle_local_position; "
+                "LOCAL_POSITION_NED + ATTITUDE_QUATERNION or ATTITUDE)");
+  cmd->add_option("--imu-message", o->imu_message,
+                  "tlog: take the IMU from this message only (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, "
+                  "RAW_IMU); default: the IMU that sends the most");
   cmd->add_option("--db", o->db, "The session store to import into")->capture_default_str();
-  auto* imu_axes = cmd->add_option("--imu-axes", o->imu_axes,
-                  "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
-                  "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes); ulog: frd")
-      ->capture_default_str();
+  auto* imu_axes =
+      cmd->add_option(
+             "--imu-axes", o->imu_axes,
+             "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
+             "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes); ulog, tlog: frd")
+          ->capture_default_str();
   auto* accel_lsb =
       cmd->add_option("--accel-lsb", o->accel_lsb,
-                      "Accelerometer resolution of the imported frames, m/s^2 per count (ulog: 5e-3)")
+                      "Accelerometer resolution of the imported frames, m/s^2 per count (ulog: 5e-3; tlog: of "
+                      "RAW_IMU, which is imported only given both resolutions, e.g. 0.00980665 for ArduPilot's mG)")
           ->check(CLI::PositiveNumber)
           ->capture_default_str();
   auto* gyro_lsb =
-      cmd->add_option("--gyro-lsb", o->gyro_lsb, "Gyro resolution of the imported frames, rad/s per count (ulog: 1.1e-3)")
+      cmd->add_option("--gyro-lsb", o->gyro_lsb,
+                      "Gyro resolution of the imported frames, rad/s per count (ulog: 1.1e-3; tlog: of RAW_IMU, "
+                      "e.g. 0.001 for ArduPilot's mrad/s)")
           ->check(CLI::PositiveNumber)
           ->capture_default_str();
   cmd->footer(
       "Rows that cannot be used are skipped and reported by line and reason; values beyond the frames'\n"
       "range are clipped and reported. tum: 't x y z qx qy qz qw', t in s; euroc-gt: EuRoC's ground-truth CSV.\n"
       "ulog: a PX4 log; IMU from sensor_combined (or sensor_accel + sensor_gyro), reference from vehicle_attitude\n"
-      "and vehicle_local_position, logged strings and dropouts as events, parameters and info in the config.");
+      "and vehicle_local_position, logged strings and dropouts as events, parameters and info in the config.\n"
+      "tlog: a MAVLink telemetry log (QGroundControl, Mission Planner, MAVProxy); every frame recorded as a\n"
+      "mavlink link receives it, samples from the IMU sending the most messages, reference from\n"
+      "LOCAL_POSITION_NED with ATTITUDE_QUATERNION (or ATTITUDE), STATUSTEXT, gaps and damage as events.");
   return [o, imu_axes, accel_lsb, gyro_lsb] {
     o->imu_axes_given = imu_axes->count() > 0;
     o->accel_lsb_given = accel_lsb->count() > 0;

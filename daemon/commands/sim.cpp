@@ -1,5 +1,5 @@
 // `imubridge sim`: fly a simulated quadrotor and deliver its IMU stream — recorded as a session, written as an
-// EuRoC/ASL dataset or a capture file, or streamed live on a pseudo-terminal.
+// EuRoC/ASL dataset, a capture file or a MAVLink telemetry log, or streamed live on a pseudo-terminal.
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
@@ -23,6 +23,7 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/calibration.hpp"
+#include "replay/tlog.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
@@ -41,7 +42,7 @@ struct SimOptions {
   std::vector<std::string> effects;
   std::string protocol = "imubridge";
   double speed = 1.0;
-  std::string db, euroc, pty, file;
+  std::string db, euroc, pty, file, tlog;
   std::string imu_axes = "frd";
 };
 
@@ -262,6 +263,34 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
   return 0;
 }
 
+// The flight as a ground station's MAVLink telemetry log (.tlog): every frame of sim::MavlinkTelemetry (HIGHRES_IMU,
+// with ATTITUDE and LOCAL_POSITION_NED of the truth) a record stamped with a fixed epoch plus the flight's time, so a
+// seed always writes the same file and `import tlog` finds the simulator's samples and trajectory in it.
+int write_tlog(const SimOptions& o, const sim::SimConfig& config) {
+  if (o.protocol != "mavlink") throw std::invalid_argument("--tlog writes MAVLink telemetry: give --protocol mavlink");
+  constexpr std::uint64_t kEpochUs = 1'704'067'200'000'000;  // 2024-01-01 00:00:00 UTC
+  std::ofstream file(o.tlog, std::ios::binary | std::ios::trunc);
+  if (!file) throw std::runtime_error("cannot write " + o.tlog);
+  const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
+  sim::MavlinkTelemetry telemetry;
+  std::vector<std::vector<std::uint8_t>> frames;
+  std::vector<std::uint8_t> bytes;
+  std::uint64_t records = 0;
+  sim::simulate(config, [&](const sim::SimSample& s) {
+    frames.clear();
+    bytes.clear();
+    telemetry.encode(in_axes(s), frames);
+    const auto t = kEpochUs + static_cast<std::uint64_t>(std::llround(s.time_s * 1e6));
+    for (const auto& frame : frames) replay::tlog::append_record(bytes, t, frame);
+    file.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    records += frames.size();
+  });
+  if (!file.flush()) throw std::runtime_error("write error on " + o.tlog);
+  std::fprintf(stderr, "wrote %llu MAVLink records (%.1f s of flight) into %s\n",
+               static_cast<unsigned long long>(records), config.duration_s, o.tlog.c_str());
+  return 0;
+}
+
 const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   auto o = std::make_shared<SimOptions>();
   auto* cmd = app.add_subcommand("sim", "Fly a simulated quadrotor and record, write or stream its IMU data");
@@ -278,7 +307,7 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
                   "IMU sample rate in Hz, from " + format_number(kMinRateHz) + " to " + format_number(kMaxRateHz) +
                       " (default: the scenario's)");
   cmd->add_option("--effect", o->effects, "Extra effect NAME=VALUE, repeatable (docs/simulator.md lists them)");
-  cmd->add_option("--protocol", o->protocol, "Wire format for --db, --pty and --file")
+  cmd->add_option("--protocol", o->protocol, "Wire format for --db, --pty and --file; --tlog needs mavlink")
       ->check(CLI::IsMember({"imubridge", "xbee", "xbee-escaped", "mavlink"}))
       ->capture_default_str();
   cmd->add_option("--speed", o->speed,
@@ -302,6 +331,9 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
   out->add_option("--euroc", o->euroc, "Write an EuRoC/ASL dataset (mav0/imu0, mav0/state_groundtruth_estimate0)");
   out->add_option("--pty", o->pty, "Create a pseudo-terminal, link it at this path, and stream in real time");
   out->add_option("--file", o->file, "Write the wire bytes to this file");
+  out->add_option("--tlog", o->tlog,
+                  "Write a MAVLink telemetry log (.tlog; with --protocol mavlink): HIGHRES_IMU, ATTITUDE and "
+                  "LOCAL_POSITION_NED, stamped from 2024-01-01 00:00 UTC");
   out->require_option(1);
   return [o] {
     if (o->rate_hz) require_within("--rate", *o->rate_hz, kMinRateHz, kMaxRateHz, "Hz");
@@ -309,6 +341,7 @@ const RegisterCommand kSim([](CLI::App& app) -> CommandRunner {
     const sim::SimConfig config = make_config(*o);
     if (!o->db.empty()) return record_to_db(*o, config);
     if (!o->euroc.empty()) return write_euroc(*o, config);
+    if (!o->tlog.empty()) return write_tlog(*o, config);
     return stream_bytes(*o, config);
   };
 });

@@ -1,0 +1,56 @@
+// libFuzzer target for the MAVLink telemetry log reader (replay/tlog.hpp) behind `imubridge import tlog`. Input: a
+// tlog. A finding is a crash, a sanitizer report, an exception other than ParseError, or a Log that does not account
+// for the file: its records and damaged stretches, in order, must tile every byte of it, each record's frame must pass
+// the MAVLink checks (or be of an id no dialect here knows), and the damage must read as one line.
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "protocol/mavlink.hpp"
+#include "replay/tlog.hpp"
+
+namespace tlog = imubridge::replay::tlog;
+namespace mavlink = imubridge::protocol::mavlink;
+
+namespace {
+
+void require(bool condition) {
+  if (!condition) std::abort();
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  try {
+    const tlog::Log log = tlog::parse(std::vector<std::uint8_t>(data, data + size));
+    require(!log.records.empty());
+    std::size_t at = 0, record = 0, damage = 0;
+    std::uint64_t unverified = 0;
+    while (at < size) {  // records and damage, whichever starts here, one after another to the end
+      if (record < log.records.size() && log.records[record].offset == at) {
+        const tlog::Record& r = log.records[record++];
+        const auto check = mavlink::check_frame(log.frame(r));
+        require(check.size == r.size);
+        require(check.status == mavlink::FrameCheck::Status::frame ||
+                check.status == mavlink::FrameCheck::Status::unverified);
+        unverified += check.status == mavlink::FrameCheck::Status::unverified;
+        std::vector<std::uint8_t> again;
+        tlog::append_record(again, r.time_us, log.frame(r));
+        require(std::equal(again.begin(), again.end(), data + r.offset));
+        at += tlog::kTimeSize + r.size;
+      } else {
+        require(damage < log.damage.size() && log.damage[damage].offset == at && log.damage[damage].bytes > 0);
+        require(log.damage[damage].record == record);
+        at += log.damage[damage++].bytes;
+      }
+    }
+    require(at == size && record == log.records.size() && damage == log.damage.size());
+    require(unverified == log.unverified);
+    if (const auto summary = log.damage_summary()) require(summary->find('\n') == std::string::npos);
+  } catch (const tlog::ParseError&) {
+  }
+  return 0;
+}

@@ -1,0 +1,484 @@
+#include "replay/tlog_import.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <span>
+#include <stdexcept>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "pipeline/record_and_decode.hpp"
+#include "pipeline/recorded_session.hpp"
+#include "pipeline/session_engine.hpp"
+#include "protocol/mavlink.hpp"
+#include "replay/euroc_import.hpp"
+#include "replay/tlog.hpp"
+
+namespace imubridge::replay {
+namespace {
+
+namespace mavlink = protocol::mavlink;
+
+// Attitudes further apart than this are not interpolated across for a reference row.
+constexpr std::uint64_t kMaxAttitudeGapUs = 500'000;
+constexpr std::uint32_t kStatusTextId = 253;  // STATUSTEXT: severity, then char[50] text
+constexpr double kMicroteslaPerMilligauss = 0.1;
+
+std::int64_t ns(std::uint64_t us) { return static_cast<std::int64_t>(us) * 1000; }
+
+using Component = std::pair<std::uint8_t, std::uint8_t>;  // system id, component id
+
+// IMU messages in order of preference between IMUs that send equally many: float fields and µs times first.
+int preference(std::uint32_t msgid) {
+  switch (msgid) {
+    case mavlink::HighresImu::kId:
+      return 0;
+    case mavlink::ScaledImu::kId:
+      return 1;
+    case mavlink::RawImu::kId:
+      return 2;
+    case mavlink::ScaledImu2::kId:
+      return 3;
+    default:
+      return 4;
+  }
+}
+
+constexpr std::array<std::string_view, 5> kImuMessages{"HIGHRES_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3",
+                                                       "RAW_IMU"};
+
+// An int16 accelerometer or gyro field at the end of its range: the sender could not say more.
+template <typename M>
+bool at_range_end(const M& m) {
+  if constexpr (std::is_same_v<decltype(m.xacc), std::int16_t>) {
+    for (const std::int16_t v : {m.xacc, m.yacc, m.zacc, m.xgyro, m.ygyro, m.zgyro}) {
+      if (v == std::numeric_limits<std::int16_t>::max() || v == std::numeric_limits<std::int16_t>::min()) return true;
+    }
+  }
+  return false;
+}
+
+bool clipped(const mavlink::Decoded& decoded) {
+  return std::visit(
+      []<typename M>(const M& m) {
+        if constexpr (requires { m.xacc; }) {
+          return at_range_end(m);
+        } else {
+          return false;
+        }
+      },
+      decoded);
+}
+
+bool finite(const std::array<double, 3>& v) {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+struct Position {
+  Component from;
+  std::uint32_t epoch = 0;  // the decoder's count of restarts: device times compare within one epoch
+  std::uint64_t device_us = 0;
+  std::int64_t t_ns = 0;  // the record's time on the session's clock
+  std::array<double, 3> position{}, velocity{};
+};
+
+struct Attitude {
+  std::uint32_t epoch = 0;
+  std::uint64_t device_us = 0;
+  Eigen::Quaterniond q;
+  auto key() const { return std::pair(epoch, device_us); }
+};
+
+struct StatusText {
+  std::size_t record = 0;
+  std::uint8_t severity = 0;
+  std::string text;
+};
+
+// What the first pass over the log finds: every IMU and its messages, the reference's messages, the strings.
+struct Survey {
+  std::map<mavlink::ImuSource, std::uint64_t> imus, clipped;
+  std::map<std::string, std::uint64_t> messages;  // by name
+  std::vector<Position> positions;
+  std::map<Component, std::vector<Attitude>> quaternions, eulers;  // ATTITUDE_QUATERNION, ATTITUDE
+  std::map<Component, std::map<std::string, std::uint64_t>> attitude_skipped;
+  std::vector<StatusText> strings;
+};
+
+std::string message_name(std::uint32_t msgid) {
+  const mavlink::MessageSpec* spec = mavlink::message_spec(msgid);
+  return spec ? std::string(spec->name) : "id " + std::to_string(msgid);
+}
+
+// Firmware text for JSON and the store: printable ASCII, up to the first NUL.
+std::string clean_text(std::span<const std::uint8_t> bytes) {
+  std::string out;
+  for (const std::uint8_t c : bytes) {
+    if (c == 0) break;
+    out += c >= 0x20 && c < 0x7f ? static_cast<char>(c) : '?';
+  }
+  return out;
+}
+
+std::string severity_name(std::uint8_t severity) {
+  static const char* const kNames[] = {"emergency", "alert", "critical", "error", "warning", "notice", "info", "debug"};
+  return severity < 8 ? kNames[severity] : "severity " + std::to_string(severity);
+}
+
+void add_attitude(std::vector<Attitude>& to, Attitude a, std::map<std::string, std::uint64_t>& skipped) {
+  if (!(std::abs(a.q.norm() - 1) <= 1e-2)) {  // also NaN: an estimator not yet initialised
+    ++skipped["attitude quaternion not of unit length"];
+  } else if (!to.empty() && a.key() <= to.back().key()) {
+    ++skipped["attitude time not after the previous one's"];
+  } else {
+    a.q.normalize();
+    to.push_back(a);
+  }
+}
+
+Survey survey(const tlog::Log& log, const std::vector<std::int64_t>& mono_ns) {
+  Survey s;
+  mavlink::Decoder decoder;  // as the recorder's will: retransmissions dropped, restarts counted
+  std::vector<mavlink::Message> out;
+  for (std::size_t i = 0; i < log.records.size(); ++i) {
+    out.clear();
+    decoder.feed(log.frame(log.records[i]), out);
+    for (const mavlink::Message& m : out) {
+      ++s.messages[message_name(m.msgid)];
+      const Component from{m.sysid, m.compid};
+      if (m.msgid == kStatusTextId && m.len > 0) {
+        s.strings.push_back({i, m.payload[0], clean_text(std::span(m.payload).subspan(1, 50))});
+      }
+      const std::optional<mavlink::Decoded> decoded = mavlink::decode(m);
+      if (!decoded) continue;
+      if (const auto imu = mavlink::imu_source(m)) {
+        ++s.imus[*imu];
+        if (clipped(*decoded)) ++s.clipped[*imu];
+      } else if (const auto* lp = std::get_if<mavlink::LocalPositionNed>(&*decoded)) {
+        s.positions.push_back({from,
+                               m.clock_epoch,
+                               std::uint64_t{lp->time_boot_ms} * 1000,
+                               mono_ns[i],
+                               {lp->x, lp->y, lp->z},
+                               {lp->vx, lp->vy, lp->vz}});
+      } else if (const auto* aq = std::get_if<mavlink::AttitudeQuaternion>(&*decoded)) {
+        add_attitude(
+            s.quaternions[from],
+            {m.clock_epoch, std::uint64_t{aq->time_boot_ms} * 1000, Eigen::Quaterniond(aq->q1, aq->q2, aq->q3, aq->q4)},
+            s.attitude_skipped[from]);
+      } else if (const auto* e = std::get_if<mavlink::Attitude>(&*decoded)) {
+        // ZYX intrinsic: yaw about z, then pitch about the new y, then roll about the new x; body -> NED.
+        const Eigen::Quaterniond q = Eigen::AngleAxisd(e->yaw, Eigen::Vector3d::UnitZ()) *
+                                     Eigen::AngleAxisd(e->pitch, Eigen::Vector3d::UnitY()) *
+                                     Eigen::AngleAxisd(e->roll, Eigen::Vector3d::UnitX());
+        add_attitude(s.eulers[from], {m.clock_epoch, std::uint64_t{e->time_boot_ms} * 1000, q},
+                     s.attitude_skipped[from]);
+      }
+    }
+  }
+  return s;
+}
+
+// The IMU to import: of the candidates, the one with the most messages (the highest rate over the log), then by
+// preference(), then by sender and id.
+std::optional<mavlink::ImuSource> choose_imu(const Survey& s, const TlogImportOptions& options, bool raw_calibrated) {
+  std::optional<mavlink::ImuSource> best;
+  std::uint64_t best_count = 0;
+  for (const auto& [source, count] : s.imus) {
+    if (source.msgid == mavlink::RawImu::kId && !raw_calibrated) continue;
+    if (options.imu_message && message_name(source.msgid) != *options.imu_message) continue;
+    if (!best || count > best_count || (count == best_count && preference(source.msgid) < preference(best->msgid))) {
+      best = source;
+      best_count = count;
+    }
+  }
+  return best;
+}
+
+std::string imu_list(const Survey& s) {
+  std::string text;
+  for (const auto& [source, count] : s.imus) {
+    text += (text.empty() ? "" : "; ") + mavlink::describe(source) + ": " + std::to_string(count);
+  }
+  return text;
+}
+
+// Rows at LOCAL_POSITION_NED's times (the records' times, the session's clock), the attitude of the same sender
+// interpolated (slerp) at its device time from ATTITUDE_QUATERNION, or ATTITUDE when it sends none.
+std::vector<store::ReferenceRow> reference_rows(const Survey& s, std::optional<Component> imu_sender,
+                                                std::string& source, std::map<std::string, std::uint64_t>& skipped) {
+  std::vector<store::ReferenceRow> rows;
+  std::map<Component, std::uint64_t> senders;
+  for (const Position& p : s.positions) ++senders[p.from];
+  if (senders.empty()) return rows;
+  // The IMU's sender when it sends positions, else the sender of the most.
+  Component from = senders.begin()->first;
+  for (const auto& [c, n] : senders) {
+    if (n > senders[from]) from = c;
+  }
+  if (imu_sender && senders.contains(*imu_sender)) from = *imu_sender;
+  const auto q = s.quaternions.find(from);
+  const auto e = s.eulers.find(from);
+  const bool quaternions = q != s.quaternions.end() && !q->second.empty();
+  const std::vector<Attitude>* attitude =
+      quaternions ? &q->second : (e != s.eulers.end() && !e->second.empty() ? &e->second : nullptr);
+  source = std::string("LOCAL_POSITION_NED + ") + (quaternions ? "ATTITUDE_QUATERNION" : "ATTITUDE") + " from system " +
+           std::to_string(from.first) + ", component " + std::to_string(from.second);
+  if (const auto a = s.attitude_skipped.find(from); a != s.attitude_skipped.end()) {
+    for (const auto& [reason, count] : a->second) skipped[reason] += count;
+  }
+  for (const Position& p : s.positions) {
+    if (p.from != from) continue;
+    if (!finite(p.position)) {
+      ++skipped["position not a finite number"];
+      continue;
+    }
+    const auto key = std::pair(p.epoch, p.device_us);
+    std::optional<Eigen::Quaterniond> a;
+    if (attitude) {
+      const auto it = std::lower_bound(attitude->begin(), attitude->end(), key,
+                                       [](const Attitude& x, const auto& k) { return x.key() < k; });
+      if (it != attitude->end() && it->key() == key) {
+        a = it->q;
+      } else if (it != attitude->end() && it != attitude->begin() && std::prev(it)->epoch == p.epoch &&
+                 it->epoch == p.epoch && it->device_us - std::prev(it)->device_us <= kMaxAttitudeGapUs) {
+        const Attitude& before = *std::prev(it);
+        a = before.q.slerp(
+            static_cast<double>(p.device_us - before.device_us) / static_cast<double>(it->device_us - before.device_us),
+            it->q);
+      }
+    }
+    if (!a) {
+      ++skipped["no attitude around it"];
+      continue;
+    }
+    if (!rows.empty() && p.t_ns <= rows.back().t_ns) {
+      ++skipped["timestamp not after the previous row's"];
+      continue;
+    }
+    store::ReferenceRow& row = rows.emplace_back(
+        store::ReferenceRow{.t_ns = p.t_ns, .position = p.position, .quat_wxyz = {a->w(), a->x(), a->y(), a->z()}});
+    if (finite(p.velocity)) row.velocity = p.velocity;
+  }
+  return rows;
+}
+
+// The samples the engine decodes: counted, and kept for the check of the declared IMU axes against gravity.
+class AxesSink final : public pipeline::SessionSink {
+ public:
+  explicit AxesSink(std::int64_t t0_ns) : t0_ns_(t0_ns) {}
+  void on_sample(std::size_t, const protocol::Sample& s, std::span<const store::Estimate>, std::int64_t) override {
+    t.push_back(static_cast<double>(s.recv_mono_ns - t0_ns_) * 1e-9);
+    accel.emplace_back(s.accel[0], s.accel[1], s.accel[2]);
+    gyro.emplace_back(s.gyro[0], s.gyro[1], s.gyro[2]);
+  }
+  std::vector<double> t;
+  std::vector<Eigen::Vector3d> accel, gyro;
+
+ private:
+  std::int64_t t0_ns_;
+};
+
+nlohmann::json source_json(const mavlink::ImuSource& s) {
+  return {{"description", mavlink::describe(s)},
+          {"message", message_name(s.msgid)},
+          {"msgid", s.msgid},
+          {"sysid", s.sysid},
+          {"compid", s.compid},
+          {"id", s.id}};
+}
+
+nlohmann::json metadata(const tlog::Log& log, const Survey& s, const TlogImportOptions& options,
+                        const mavlink::ImuSource& imu, const std::string& reference) {
+  nlohmann::json imus = nlohmann::json::array();
+  for (const auto& [source, count] : s.imus) {
+    nlohmann::json j = source_json(source);
+    j["messages"] = count;
+    imus.push_back(j);
+  }
+  nlohmann::json damage = nlohmann::json::array();
+  for (const tlog::Damage& d : log.damage) {
+    damage.push_back({{"offset", d.offset}, {"bytes", d.bytes}, {"after_records", d.record}, {"what", d.what}});
+  }
+  return {{"import",
+           {{"format", "tlog"},
+            {"file", options.file.string()},
+            {"imu_source", source_json(imu)},
+            {"imus", imus},
+            {"reference", reference},
+            {"accel_lsb", options.accel_lsb ? nlohmann::json(*options.accel_lsb) : nlohmann::json(nullptr)},
+            {"gyro_lsb", options.gyro_lsb ? nlohmann::json(*options.gyro_lsb) : nlohmann::json(nullptr)},
+            {"records", log.records.size()},
+            {"first_us", log.records.front().time_us},
+            {"last_us", log.records.back().time_us},
+            {"messages", s.messages},
+            {"unverified", log.unverified},
+            {"damage", damage}}}};
+}
+
+}  // namespace
+
+TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& options) {
+  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  if (options.accel_lsb.has_value() != options.gyro_lsb.has_value()) {
+    throw std::invalid_argument("RAW_IMU needs both resolutions: --accel-lsb and --gyro-lsb");
+  }
+  const bool raw_calibrated = options.accel_lsb.has_value();
+  protocol::Calibration calibration;  // for RAW_IMU only; the other IMU messages carry SI-scaled values
+  if (raw_calibrated) {
+    calibration = import_calibration(*options.accel_lsb, *options.gyro_lsb);
+    calibration.mag.scale.fill(kMicroteslaPerMilligauss);
+    if (!calibration.valid() || !(*options.accel_lsb > 0) || !(*options.gyro_lsb > 0)) {
+      throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
+    }
+  }
+  if (options.imu_message && std::ranges::find(kImuMessages, *options.imu_message) == kImuMessages.end()) {
+    throw std::invalid_argument("--imu-message " + *options.imu_message +
+                                ": not an IMU message (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, RAW_IMU)");
+  }
+  const tlog::Log log = tlog::read_file(options.file);
+  const std::string file = options.file.string();
+
+  TlogImportResult result;
+  // The session's clock is the log's, held still while the log's time goes back (a ground station's clock set back),
+  // so chunks, samples, reference and events keep one increasing time line; the wall clock is the log's as written.
+  std::vector<std::int64_t> mono_ns(log.records.size());
+  for (std::size_t i = 0; i < log.records.size(); ++i) {
+    mono_ns[i] = i == 0 ? ns(log.records[i].time_us) : std::max(mono_ns[i - 1], ns(log.records[i].time_us));
+  }
+  const Survey s = survey(log, mono_ns);
+  const std::optional<mavlink::ImuSource> imu = choose_imu(s, options, raw_calibrated);
+  if (!imu) {
+    std::string why;
+    if (s.imus.empty()) {
+      why = "no IMU messages (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3 or RAW_IMU) in its " +
+            std::to_string(log.records.size()) + " records";
+    } else if (options.imu_message) {
+      why = "no " + *options.imu_message + " messages" +
+            (raw_calibrated || *options.imu_message != "RAW_IMU"
+                 ? ""
+                 : " that can be used without --accel-lsb and --gyro-lsb") +
+            " (its IMUs: " + imu_list(s) + ")";
+    } else {
+      why =
+          "its only IMU messages are RAW_IMU, which carry counts: give their resolution with --accel-lsb and "
+          "--gyro-lsb (ArduPilot sends mG and mrad/s: 0.00980665 and 0.001)";
+    }
+    throw std::invalid_argument(file + ": " + why +
+                                (log.damage.empty() ? "" : "; the file is damaged: " + *log.damage_summary()));
+  }
+  result.imu_source = mavlink::describe(*imu);
+  for (const auto& [source, count] : s.imus) {
+    result.imu_messages[mavlink::describe(source)] = count;
+    if (source == *imu) continue;
+    const bool raw_without = source.msgid == mavlink::RawImu::kId && !raw_calibrated;
+    result.skipped[mavlink::describe(source) + (raw_without ? ": RAW_IMU counts without --accel-lsb and --gyro-lsb"
+                                                            : ": not the IMU imported")] += count;
+  }
+  if (const auto c = s.clipped.find(*imu); c != s.clipped.end()) result.clipped = c->second;
+  std::vector<store::ReferenceRow> reference;
+  if (options.reference) {
+    reference =
+        reference_rows(s, Component{imu->sysid, imu->compid}, result.reference_source, result.reference_skipped);
+  }
+  if (reference.empty()) result.reference_source.clear();
+  result.reference_rows = reference.size();
+  result.records = log.records.size();
+  result.unverified = log.unverified;
+  result.damage = log.damage_summary();
+  result.damaged_bytes = log.damaged_bytes();
+  result.first_us = log.records.front().time_us;
+  result.last_us = log.records.back().time_us;
+
+  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+      store,
+      {.kind = "import",
+       .source = "MAVLink telemetry log " + file,
+       .config = metadata(log, s, options, *imu, result.reference_source),
+       .started_wall_ns = ns(result.first_us)},
+      {{.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
+        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source}});
+  result.session = recorded.id;
+  const std::int64_t link = recorded.store_links[0];
+  // Every frame through the session engine without estimation: an import has no parameters (a replay estimates).
+  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+  pipeline::SessionEngine engine(nullptr);
+  AxesSink samples(mono_ns.front());
+  engine.add_sink(samples);
+  for (std::size_t i = 0; i < log.records.size(); ++i) {
+    engine.on_chunk(0, recording, log.frame(log.records[i]), mono_ns[i], ns(log.records[i].time_us));
+    store.commit_if_due(std::chrono::steady_clock::now());
+  }
+  const std::int64_t end_mono = mono_ns.back();
+  const std::int64_t end_wall = ns(log.records.back().time_us);
+  engine.finish_link(0, recording, end_mono, end_wall);
+  engine.finish();
+  result.samples = samples.t.size();
+  for (const auto& row : reference) store.append_reference(result.session, row);
+
+  const auto event = [&](std::optional<std::int64_t> on, std::size_t record, std::string kind, std::int64_t count,
+                         std::string detail) {
+    store.append_event(result.session, {.link_id = on,
+                                        .mono_ns = mono_ns[record],
+                                        .wall_ns = ns(log.records[record].time_us),
+                                        .kind = std::move(kind),
+                                        .count = count,
+                                        .detail = std::move(detail)});
+  };
+  for (const StatusText& t : s.strings) {
+    event(std::nullopt, t.record, "log", 1, severity_name(t.severity) + ": " + t.text);
+    ++result.log_events;
+  }
+  for (std::size_t i = 1; i < log.records.size(); ++i) {
+    const std::uint64_t before = log.records[i - 1].time_us, now = log.records[i].time_us;
+    if (now > before + kTlogGapUs) {
+      const double gap = static_cast<double>(now - before) * 1e-6;
+      char text[96];
+      std::snprintf(text, sizeof text, "no record in the log for %.1f s", gap);
+      event(link, i - 1, "log_gap", 1, text);
+      ++result.gaps;
+      result.gap_s += gap;
+    } else if (now < before) {
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "the log's time went back %.3f s (its clock set back?); the session's clock waits for it",
+                    static_cast<double>(before - now) * 1e-6);
+      event(link, i, "log_time_back", 1, text);
+      ++result.time_back;
+    }
+  }
+  const std::size_t last = log.records.size() - 1;
+  for (const auto& [reason, count] : result.skipped) {
+    event(link, last, "import_skipped", static_cast<std::int64_t>(count),
+          file + ": " + std::to_string(count) + " IMU messages: " + reason);
+  }
+  for (const auto& [reason, count] : result.reference_skipped) {
+    event(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
+          file + ": " + std::to_string(count) + " reference rows: " + reason);
+  }
+  if (result.clipped > 0) {
+    event(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
+          file + ": " + std::to_string(result.clipped) +
+              " samples with a value at the end of its field's range (clipped by the sender?)");
+  }
+  for (const tlog::Damage& d : log.damage) {
+    event(std::nullopt, d.record == 0 ? 0 : d.record - 1, "import_damaged", static_cast<std::int64_t>(d.bytes),
+          file + ": " + std::to_string(d.bytes) + " bytes at byte " + std::to_string(d.offset) + " are no record (" +
+              d.what + "); the records around them are imported");
+  }
+  result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(samples.t, samples.accel, samples.gyro));
+  if (result.axes.mismatch) event(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
+  pipeline::end_recorded_session(store, result.session, std::max(end_wall, ns(result.first_us)));
+  return result;
+}
+
+}  // namespace imubridge::replay
