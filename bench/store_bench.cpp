@@ -47,7 +47,7 @@ std::vector<protocol::Sample> samples(std::uint32_t link) {
 // A database holding one session with one link, as the Store creates it; returns the link id (the session's is 1).
 std::uint32_t prepare(const fs::path& path) {
   Store store(path);
-  return static_cast<std::uint32_t>(store.add_link(store.begin_session({.kind = "bench"}), "imu0", "imubridge", ""));
+  return store.add_link(store.begin_session({.kind = "bench"}), "imu0", "imubridge", "");
 }
 
 void BM_StoreIngest(benchmark::State& state) {

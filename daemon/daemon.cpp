@@ -137,17 +137,17 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
   // that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.
   // Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
   pipeline::StageAxes axes;
-  axes.declared = [this](std::uint32_t id) {
+  axes.declared = [this](protocol::LinkId id) {
     const auto axes_of = [](const Link& link) {
       return estimator::parse_imu_axes(link.config.axes);  // checked when the config was read
     };
     if (pipeline::is_unrecorded_radio_id(id)) return axes_of(*links_.at(pipeline::unrecorded_radio_link_index(id)));
     for (const auto& link : links_) {
-      if (link->store_link == static_cast<std::int64_t>(id)) return axes_of(*link);
+      if (link->store_link == id) return axes_of(*link);
     }
     if (recording_) {
       for (const store::Link& stored : recording_->store.links(recording_->session)) {
-        if (stored.id != static_cast<std::int64_t>(id)) continue;
+        if (stored.id != id) continue;
         if (const auto radio = pipeline::parse_radio_link_name(stored.name)) {
           for (const auto& link : links_) {
             if (link->config.name == radio->link) return axes_of(*link);
@@ -157,7 +157,7 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     }
     return estimator::auto_axes();
   };
-  axes.on_resolved = [this](std::uint32_t id, const estimator::AxesResolution& resolution) {
+  axes.on_resolved = [this](protocol::LinkId id, const estimator::AxesResolution& resolution) {
     spdlog::info("link {}: {}", id, resolution.description);
     if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
     if (!resolution.mismatch) return;

@@ -74,7 +74,7 @@ struct Daemon::Link {
   std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
-  std::map<std::uint32_t, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
+  std::map<protocol::LinkId, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
   std::unique_ptr<pipeline::ChunkDecoding> decoding;    // recorder or decoder, whichever the link has now
 
   const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }

@@ -130,8 +130,8 @@ void Daemon::use_decoders() {
     link.retire_decoder();
     // Each XBee radio gets a link id of its own, above any store link's, so no estimator mixes two vehicles.
     link.decoder = std::make_unique<pipeline::LinkDecoder>(
-        link.config.format, static_cast<std::uint32_t>(link.store_link), link.config.calibration,
-        [radios = std::map<std::uint64_t, std::uint32_t>(), i](std::uint64_t source64) mutable {
+        link.config.format, link.store_link, link.config.calibration,
+        [radios = std::map<std::uint64_t, protocol::LinkId>(), i](std::uint64_t source64) mutable {
           const auto id = pipeline::unrecorded_radio_id(i, static_cast<std::uint32_t>(radios.size()));
           return radios.try_emplace(source64, id).first->second;
         });

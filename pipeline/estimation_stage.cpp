@@ -25,7 +25,7 @@ EstimationStage::EstimationStage(const estimator::ModelParams& params, const est
 
 int EstimationStage::delay_samples() const { return (config_.differentiator_window - 1) / 2; }
 
-EstimationStage::LinkState& EstimationStage::link(std::uint32_t id) {
+EstimationStage::LinkState& EstimationStage::link(protocol::LinkId id) {
   auto it = links_.find(id);
   if (it != links_.end()) return it->second;
   LinkState state{estimator::DragVelocityEstimator(params_.full, config_), {}};
@@ -43,7 +43,7 @@ EstimationStage::LinkState& EstimationStage::link(std::uint32_t id) {
   return links_.emplace(id, std::move(state)).first->second;
 }
 
-void EstimationStage::resolve(std::uint32_t id, LinkState& link) {
+void EstimationStage::resolve(protocol::LinkId id, LinkState& link) {
   const estimator::AxesResolution resolution = estimator::resolve_axes(link.declared, link.detector->result());
   link.detector.reset();
   link.imu_to_body = resolution.axes.imu_to_body;

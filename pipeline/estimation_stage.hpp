@@ -24,13 +24,13 @@ namespace imubridge::pipeline {
 // is lost, and the same samples give the same estimates bit for bit. Declared links are checked against gravity the
 // same way without waiting.
 struct StageAxes {
-  std::map<std::uint32_t, estimator::ImuAxes> links{};  // by link id
-  estimator::ImuAxes others = estimator::auto_axes();  // links not listed
+  std::map<protocol::LinkId, estimator::ImuAxes> links{};  // by link id
+  estimator::ImuAxes others = estimator::auto_axes();      // links not listed
   // When set, asked instead of `links` and `others` (for link ids made on the fly, such as one per XBee radio).
-  std::function<estimator::ImuAxes(std::uint32_t link)> declared{};
+  std::function<estimator::ImuAxes(protocol::LinkId link)> declared{};
   // Called once per link when its axes are resolved (auto) or checked (declared); resolution.mismatch says the
   // data disagree with a declaration.
-  std::function<void(std::uint32_t link, const estimator::AxesResolution& resolution)> on_resolved{};
+  std::function<void(protocol::LinkId link, const estimator::AxesResolution& resolution)> on_resolved{};
 };
 
 class EstimationStage {
@@ -62,21 +62,21 @@ class EstimationStage {
     std::deque<std::pair<double, std::uint64_t>> pending;  // (time, seq) of samples not yet estimated
     estimator::ImuAxes declared{estimator::frd_axes()};
     Eigen::Matrix3d imu_to_body = Eigen::Matrix3d::Identity();
-    bool rotate = false;                                 // imu_to_body is not the identity
-    std::optional<estimator::UpDetector> detector{};      // until the axes are resolved or checked
-    std::vector<protocol::Sample> waiting{};             // an auto link's samples until its axes are decided
-    std::uint32_t clock_epoch = 0;                       // the device's restarts so far (protocol::Sample)
+    bool rotate = false;                              // imu_to_body is not the identity
+    std::optional<estimator::UpDetector> detector{};  // until the axes are resolved or checked
+    std::vector<protocol::Sample> waiting{};          // an auto link's samples until its axes are decided
+    protocol::LinkId clock_epoch = 0;                 // the device's restarts so far (protocol::Sample)
     std::optional<std::int64_t> last_recv_mono_ns{};
   };
 
-  LinkState& link(std::uint32_t id);
-  void resolve(std::uint32_t id, LinkState& link);
+  LinkState& link(protocol::LinkId id);
+  void resolve(protocol::LinkId id, LinkState& link);
   std::optional<store::Estimate> estimate(LinkState& link, const protocol::Sample& sample);
 
   estimator::ModelParams params_;
   estimator::DragVelocityConfig config_;
   std::optional<StageAxes> axes_;
-  std::map<std::uint32_t, LinkState> links_;
+  std::map<protocol::LinkId, LinkState> links_;
 };
 
 }  // namespace imubridge::pipeline

@@ -49,14 +49,14 @@ struct MavlinkLink {
 
 struct LinkDecoder::Impl {
   protocol::WireFormat format;
-  std::uint32_t link_id;
+  protocol::LinkId link_id;
   protocol::Calibration calibration;
   SourceResolver resolve_source;
   std::optional<protocol::mavlink::ImuSource> mavlink_imu;
   std::variant<ImuLink, XbeeLink, MavlinkLink> link;
   std::uint64_t frames_without_sample = 0;
 
-  void emit(const protocol::imu::Frame& frame, std::uint32_t link, std::int64_t t,
+  void emit(const protocol::imu::Frame& frame, protocol::LinkId link, std::int64_t t,
             std::vector<protocol::Sample>& out) {
     if (auto sample = protocol::to_sample(frame, calibration, link, t)) {
       out.push_back(*sample);
@@ -105,8 +105,9 @@ struct LinkDecoder::Impl {
   }
 };
 
-LinkDecoder::LinkDecoder(protocol::WireFormat format, std::uint32_t link_id, const protocol::Calibration& calibration,
-                         SourceResolver resolve_source, std::optional<protocol::mavlink::ImuSource> mavlink_imu)
+LinkDecoder::LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id,
+                         const protocol::Calibration& calibration, SourceResolver resolve_source,
+                         std::optional<protocol::mavlink::ImuSource> mavlink_imu)
     : impl_(std::make_unique<Impl>(
           Impl{format, link_id, calibration, std::move(resolve_source), mavlink_imu, ImuLink{}, 0})) {
   if (!calibration.valid()) throw std::invalid_argument("invalid calibration (axis map, signs or scales)");

@@ -23,11 +23,11 @@ class LinkDecoder {
  public:
   // On an XBee link every radio (64-bit source address) is a sample stream of its own; the resolver gives the link id
   // its samples carry (the recorder makes one store link per radio). Without a resolver they all carry link_id.
-  using SourceResolver = std::function<std::uint32_t(std::uint64_t source64)>;
+  using SourceResolver = std::function<protocol::LinkId(std::uint64_t source64)>;
 
   // On a MAVLink link every IMU message gives a sample unless `mavlink_imu` names the one IMU to take samples from;
   // the others' messages then count as frames without a sample, like ATTITUDE.
-  LinkDecoder(protocol::WireFormat format, std::uint32_t link_id, const protocol::Calibration& calibration,
+  LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id, const protocol::Calibration& calibration,
               SourceResolver resolve_source = {}, std::optional<protocol::mavlink::ImuSource> mavlink_imu = {});
   ~LinkDecoder();
   LinkDecoder(LinkDecoder&&) noexcept;

@@ -24,19 +24,19 @@ LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64
       link_name_(std::move(link_name)),
       format_name_(protocol::wire_format_name(format)),
       decoder_(
-          format, static_cast<std::uint32_t>(link_id), calibration,
+          format, link_id, calibration,
           [this](std::uint64_t source64) {
             auto [it, added] = radio_links_.try_emplace(source64, 0);
             if (added) {
               it->second = store_.add_link(session_, radio_link_name(link_name_, source64), format_name_,
                                            radio_link_description(link_name_, source64));
             }
-            return static_cast<std::uint32_t>(it->second);
+            return it->second;
           },
           mavlink_imu) {}
 
-void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns,
-                            std::int64_t recv_wall_ns, std::vector<protocol::Sample>& samples) {
+void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
+                            std::vector<protocol::Sample>& samples) {
   store_.append_chunk(session_, link_id_, store::Direction::rx, recv_mono_ns, recv_wall_ns, bytes);
   const std::size_t first = samples.size();
   decoder_.feed(bytes, recv_mono_ns, samples);
@@ -52,8 +52,12 @@ void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vecto
   nlohmann::json counters;
   for (const auto& [layer, c] : decoder_.counters()) counters[layer] = c;
   counters["frames_without_sample"] = decoder_.frames_without_sample();
-  store_.append_event(session_, {.link_id = link_id_, .mono_ns = mono_ns, .wall_ns = wall_ns, .kind = "counters",
-                                 .count = 1, .detail = counters.dump()});
+  store_.append_event(session_, {.link_id = link_id_,
+                                 .mono_ns = mono_ns,
+                                 .wall_ns = wall_ns,
+                                 .kind = "counters",
+                                 .count = 1,
+                                 .detail = counters.dump()});
 }
 
 void LinkRecorder::store_samples(std::size_t first, const std::vector<protocol::Sample>& samples) {
@@ -67,8 +71,12 @@ void LinkRecorder::record_losses(std::int64_t mono_ns, std::int64_t wall_ns) {
   const auto record = [&](const char* kind, std::uint64_t before, std::uint64_t after, const char* unit) {
     if (after == before) return;
     const auto count = static_cast<std::int64_t>(after - before);
-    store_.append_event(session_, {.link_id = link_id_, .mono_ns = mono_ns, .wall_ns = wall_ns, .kind = kind,
-                                   .count = count, .detail = std::to_string(count) + " " + unit});
+    store_.append_event(session_, {.link_id = link_id_,
+                                   .mono_ns = mono_ns,
+                                   .wall_ns = wall_ns,
+                                   .kind = kind,
+                                   .count = count,
+                                   .detail = std::to_string(count) + " " + unit});
   };
   record("sequence_gap", recorded_.frames_lost, now.frames_lost, "frames missing by sequence number");
   record("crc_failure", recorded_.crc_failures, now.crc_failures, "frames failed their CRC/checksum");

@@ -9,6 +9,8 @@
 #include <string>
 #include <string_view>
 
+#include "protocol/sample.hpp"
+
 namespace imubridge::pipeline {
 
 // The store link of radio `source64` heard through link `link`: "<link>/<SOURCE64>".
@@ -26,11 +28,11 @@ struct RadioLinkName {
 std::optional<RadioLinkName> parse_radio_link_name(std::string_view name);
 
 // The link id of the `radio_index`-th radio (in order of first appearance) heard through the `link_index`-th link,
-// while not recording: the top bit set, so above any store link's id; the link's index in bits 16-30, the radio's in
-// bits 0-15.
-std::uint32_t unrecorded_radio_id(std::uint32_t link_index, std::uint32_t radio_index);
-bool is_unrecorded_radio_id(std::uint32_t id);
+// while not recording: bit 62 set, far above any store link's id (SQLite counts row ids up from 1); the link's index
+// in bits 16-30, the radio's in bits 0-15.
+protocol::LinkId unrecorded_radio_id(std::uint32_t link_index, std::uint32_t radio_index);
+bool is_unrecorded_radio_id(protocol::LinkId id);
 // The index of the link an unrecorded_radio_id() was heard through.
-std::uint32_t unrecorded_radio_link_index(std::uint32_t id);
+std::uint32_t unrecorded_radio_link_index(protocol::LinkId id);
 
 }  // namespace imubridge::pipeline

@@ -84,7 +84,7 @@ imu::ImuRaw Calibration::to_counts(const std::array<double, 3>& accel_si, const 
           to_count((temperature_c - temperature_offset_c) / temperature_scale)};
 }
 
-std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, std::uint32_t link_id,
+std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, LinkId link_id,
                                 std::int64_t recv_mono_ns) {
   const auto* raw = std::get_if<imu::ImuRaw>(&frame.payload);
   if (!raw) return std::nullopt;

@@ -5,8 +5,12 @@
 
 namespace imubridge::protocol {
 
+// Which link a sample came from (a serial port, or an XBee radio heard through one). While recording it is the
+// link's row id in the store (SQLite's 64-bit integer), so samples, estimates and events all name a link the same way.
+using LinkId = std::int64_t;
+
 struct Sample {
-  std::uint32_t link_id = 0;        // which link (serial port / XBee source) it came from
+  LinkId link_id = 0;               // which link (serial port / XBee source) it came from
   std::uint64_t seq = 0;            // sequence number, unwrapped to 64 bits by the receiver
   std::int64_t device_time_us = 0;  // timestamp the device put on the measurement
   std::uint32_t clock_epoch = 0;    // the device's restarts seen before it: device_time_us counts from the last one

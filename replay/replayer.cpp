@@ -16,7 +16,7 @@
 namespace imubridge::replay {
 namespace {
 
-constexpr std::uint32_t kNoLink = 0;  // SQLite never gives a row the id 0
+constexpr protocol::LinkId kNoLink = 0;  // SQLite never gives a row the id 0
 
 std::int64_t wall_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
@@ -44,12 +44,11 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
     }
     auto resolve = [ids, link = recorded.name](std::uint64_t source64) {
       const auto radio = ids->find(pipeline::radio_link_name(link, source64));
-      return radio == ids->end() ? kNoLink : static_cast<std::uint32_t>(radio->second);
+      return radio == ids->end() ? kNoLink : radio->second;
     };
-    decoders.emplace(port->second,
-                     ReplayedLink{recorded.name, pipeline::LinkDecoder(
-                                                     recorded.format, static_cast<std::uint32_t>(port->second),
-                                                     recorded.calibration, std::move(resolve), recorded.mavlink_imu)});
+    decoders.emplace(port->second, ReplayedLink{recorded.name, pipeline::LinkDecoder(
+                                                                   recorded.format, port->second, recorded.calibration,
+                                                                   std::move(resolve), recorded.mavlink_imu)});
   }
   return decoders;
 }
@@ -63,7 +62,7 @@ pipeline::StageAxes recorded_axes(const store::Store& store, const store::Sessio
     const auto radio = pipeline::parse_radio_link_name(link.name);
     for (const auto& r : recorded) {
       if (link.name == r.name || (radio && radio->link == r.name)) {
-        axes.links[static_cast<std::uint32_t>(link.id)] = estimator::parse_imu_axes(r.imu_axes);
+        axes.links[link.id] = estimator::parse_imu_axes(r.imu_axes);
         break;
       }
     }
@@ -147,8 +146,7 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
     }
     ReplayedLink& link = it->second;
     RecordedLinksOnly decoding(link.decoder, result);
-    engine.on_chunk(static_cast<std::size_t>(it->first), decoding, chunk.bytes, chunk.recv_mono_ns,
-                    chunk.recv_wall_ns);
+    engine.on_chunk(static_cast<std::size_t>(it->first), decoding, chunk.bytes, chunk.recv_mono_ns, chunk.recv_wall_ns);
     link.last_mono_ns = chunk.recv_mono_ns;
     link.fed = true;
     ++result.chunks;

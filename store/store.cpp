@@ -584,7 +584,7 @@ void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> li
   bind_optional_int(query, 2, link);
   while (query.step()) {
     protocol::Sample sample;
-    sample.link_id = static_cast<std::uint32_t>(query.column_int(0));
+    sample.link_id = query.column_int(0);
     sample.seq = seq_from_column(query.column_int(1));
     sample.device_time_us = query.column_int(2);
     sample.recv_mono_ns = query.column_int(3);

@@ -40,7 +40,7 @@ class IdentifyCommand : public ::testing::Test {
     const std::int64_t link = store.add_link(session, "imu0", "imubridge", "test");
     for (int k = 0; k < 400; ++k) {
       protocol::Sample s;
-      s.link_id = static_cast<std::uint32_t>(link);
+      s.link_id = link;
       s.device_time_us = 5000 * k;
       s.recv_mono_ns = 5'000'000 * static_cast<std::int64_t>(k);
       s.accel = {0.0, 0.0, -9.8};

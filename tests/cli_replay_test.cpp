@@ -345,7 +345,7 @@ class ExportCommand : public ReplayCommand {
     store::Store store(db_);
     session_ = store.begin_session({.kind = "sim", .source = "test", .config = "{}", .started_wall_ns = 1});
     const auto link = store.add_link(session_, "imu0", "imubridge", "test");
-    with_mag_ = {.link_id = static_cast<std::uint32_t>(link),
+    with_mag_ = {.link_id = link,
                  .seq = 18446744073709551615u,
                  .device_time_us = 5000,
                  .recv_mono_ns = 123456789012,
@@ -355,12 +355,8 @@ class ExportCommand : public ReplayCommand {
                  .temperature_c = 31.25,
                  .has_mag = true,
                  .has_temperature = true};
-    without_mag_ = {.link_id = static_cast<std::uint32_t>(link),
-                    .seq = 1,
-                    .device_time_us = 10000,
-                    .recv_mono_ns = 2,
-                    .accel = {1, 2, 3},
-                    .gyro = {4, 5, 6}};
+    without_mag_ = {
+        .link_id = link, .seq = 1, .device_time_us = 10000, .recv_mono_ns = 2, .accel = {1, 2, 3}, .gyro = {4, 5, 6}};
     store.append_sample(session_, with_mag_);
     store.append_sample(session_, without_mag_);
     run_ = store.begin_run(session_, {.kind = "live", .params_json = "{}"});

@@ -450,7 +450,7 @@ class SessionSeriesTest : public ::testing::Test {
 
   static protocol::Sample sample(std::int64_t link, std::int64_t device_us, std::int64_t recv_ns, double value) {
     protocol::Sample s;
-    s.link_id = static_cast<std::uint32_t>(link);
+    s.link_id = link;
     s.device_time_us = device_us;
     s.recv_mono_ns = recv_ns;
     s.accel = {value, -value, -9.8};

@@ -340,7 +340,7 @@ TEST(ImuAxesStage, AutoLinkWaitsThenGivesTheFrdEstimatesBitForBit) {
   }
   std::vector<std::string> resolved;
   pipeline::StageAxes axes;
-  axes.on_resolved = [&](std::uint32_t, const AxesResolution& r) { resolved.push_back(r.description); };
+  axes.on_resolved = [&](protocol::LinkId, const AxesResolution& r) { resolved.push_back(r.description); };
   pipeline::EstimationStage flu(params, axes);
   std::vector<store::Estimate> got;
   for (const auto& s : samples(parse_imu_axes("flu").imu_to_body)) flu.update(s, got);

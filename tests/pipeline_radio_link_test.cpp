@@ -35,20 +35,20 @@ TEST(RadioLink, OtherNamesAreNotRadios) {
 }
 
 TEST(RadioLink, UnrecordedIdsAreAboveStoreIdsAndNameTheirLink) {
-  std::set<std::uint32_t> ids;
+  std::set<protocol::LinkId> ids;
   for (std::uint32_t link = 0; link < 3; ++link) {
     for (std::uint32_t radio = 0; radio < 3; ++radio) {
-      const std::uint32_t id = unrecorded_radio_id(link, radio);
+      const protocol::LinkId id = unrecorded_radio_id(link, radio);
       EXPECT_TRUE(is_unrecorded_radio_id(id));
-      EXPECT_GE(id, 0x80000000u);
+      EXPECT_GE(id, protocol::LinkId{1} << 62);
       EXPECT_EQ(unrecorded_radio_link_index(id), link);
       ids.insert(id);
     }
   }
   EXPECT_EQ(ids.size(), 9u) << "every radio of every link has an id of its own";
-  EXPECT_EQ(unrecorded_radio_id(2, 5), 0x80020005u);
+  EXPECT_EQ(unrecorded_radio_id(2, 5), (protocol::LinkId{1} << 62) + 0x20005);
   EXPECT_FALSE(is_unrecorded_radio_id(1));  // store link ids (SQLite row ids) stay far below
-  EXPECT_FALSE(is_unrecorded_radio_id(0x7fffffffu));
+  EXPECT_FALSE(is_unrecorded_radio_id(std::int64_t{1} << 40));
 }
 
 }  // namespace

@@ -229,7 +229,7 @@ TEST_F(StoreTest, SamplesRoundTripBitExact) {
   {
     Store store(path_);
     session = store.begin_session(kLive);
-    for (auto& s : written) s.link_id = static_cast<std::uint32_t>(store.add_link(session, "imu", "imubridge", ""));
+    for (auto& s : written) s.link_id = store.add_link(session, "imu", "imubridge", "");
     for (const auto& s : written) store.append_sample(session, s);
   }
   const auto read = samples_of(Store(path_, {.read_only = true}), session);
@@ -308,7 +308,7 @@ TEST_F(StoreTest, BackgroundCheckpointsMoveTheLogIntoTheFileWhileTheRecorderWrit
   {
     Store store(path_, {.background_checkpoint = 20ms});
     const std::int64_t session = store.begin_session(kLive);
-    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    const auto link = store.add_link(session, "imu0", "imubridge", "");
     const auto size_before = fs::file_size(path_);
     for (std::uint64_t i = 0; i < kSamples; ++i) store.append_sample(session, sample(link, i));
     store.commit();
@@ -327,7 +327,7 @@ TEST_F(StoreTest, BackgroundCheckpointsMoveTheLogIntoTheFileWhileTheRecorderWrit
 TEST_F(StoreTest, CommitIfDueWaitsForTheIntervalSinceItsLastCommit) {
   Store store(path_, {.commit_interval = 200ms});
   const std::int64_t session = store.begin_session(kLive);
-  const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+  const auto link = store.add_link(session, "imu0", "imubridge", "");
   const auto t0 = std::chrono::steady_clock::time_point{} + 1h;
 
   EXPECT_FALSE(store.commit_if_due(t0)) << "nothing pending";
@@ -354,7 +354,7 @@ TEST_F(StoreTest, BatchLimitExplicitCommitAndDestructionCommit) {
   {
     Store store(path_, {.commit_interval = 1h, .max_batch_rows = 3});
     const std::int64_t session = store.begin_session(kLive);  // committed at once, with its link
-    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    const auto link = store.add_link(session, "imu0", "imubridge", "");
     EXPECT_EQ(query(path_, "SELECT count(*) FROM links"), "1");
     store.append_sample(session, sample(link, 0));
     store.append_sample(session, sample(link, 1));
@@ -373,7 +373,7 @@ TEST_F(StoreTest, BatchLimitExplicitCommitAndDestructionCommit) {
 TEST_F(StoreTest, RejectedRowThrowsAndLeavesTheBatchAlone) {
   Store store(path_, {.commit_interval = 1h});
   const std::int64_t session = store.begin_session(kLive);
-  const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+  const auto link = store.add_link(session, "imu0", "imubridge", "");
   const std::int64_t other = store.begin_session(kLive);
   const std::int64_t run = store.begin_run(session, {.kind = "live"});
   store.append_sample(session, sample(link, 0));
@@ -396,8 +396,8 @@ TEST_F(StoreTest, RejectedRowThrowsAndLeavesTheBatchAlone) {
   EXPECT_EQ(samples[1].seq, 2u);
 }
 
-// Estimates reach SQLite in bursts, kRowsPerStatement to a statement (store.hpp). Whatever the batching, they keep their
-// append order across runs and links, count as pending, are seen by their own Store at once and by everyone once
+// Estimates reach SQLite in bursts, kRowsPerStatement to a statement (store.hpp). Whatever the batching, they keep
+// their append order across runs and links, count as pending, are seen by their own Store at once and by everyone once
 // committed.
 std::vector<Estimate> estimates_of(const Store& store, std::int64_t run) {
   std::vector<Estimate> estimates;
@@ -463,20 +463,32 @@ TEST_F(StoreTest, BatchedEstimatesKeepAppendOrderAndAreSeenAtOnce) {
 TEST_F(StoreTest, WaitingSamplesAndChunksReadBackAsTheyWillBeStored) {
   Store store(path_, {.commit_interval = 1h});
   const std::int64_t session = store.begin_session(kLive);
-  const auto imu0 = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
-  const auto imu1 = static_cast<std::uint32_t>(store.add_link(session, "imu1", "imubridge", ""));
+  const auto imu0 = store.add_link(session, "imu0", "imubridge", "");
+  const auto imu1 = store.add_link(session, "imu1", "imubridge", "");
   const std::size_t count = Store::kMaxWaitingRows + Store::kRowsPerStatement + 3;
   std::vector<protocol::Sample> appended;
   std::vector<Chunk> chunks;
   for (std::size_t i = 0; i < count; ++i) {
     protocol::Sample s = sample(i % 3 == 0 ? imu1 : imu0, i);
     switch (i % 6) {
-      case 0: s.accel[1] = kNaN, s.gyro[2] = -0.0; break;
-      case 1: s.has_mag = true, s.mag = {kNaN, kNaN, kNaN}; break;  // all NULL: reads back as no magnetometer
-      case 2: s.has_mag = true, s.mag = {kNaN, 30.0, kDenormal}; break;
-      case 3: s.has_temperature = true, s.temperature_c = kNaN; break;
-      case 4: s.has_temperature = true, s.temperature_c = 21.5, s.has_raw = true, s.raw = {1, -2, 3}; break;
-      case 5: s.raw = {7, 7, 7}; break;  // has_raw is false: the counts are not stored
+      case 0:
+        s.accel[1] = kNaN, s.gyro[2] = -0.0;
+        break;
+      case 1:
+        s.has_mag = true, s.mag = {kNaN, kNaN, kNaN};
+        break;  // all NULL: reads back as no magnetometer
+      case 2:
+        s.has_mag = true, s.mag = {kNaN, 30.0, kDenormal};
+        break;
+      case 3:
+        s.has_temperature = true, s.temperature_c = kNaN;
+        break;
+      case 4:
+        s.has_temperature = true, s.temperature_c = 21.5, s.has_raw = true, s.raw = {1, -2, 3};
+        break;
+      case 5:
+        s.raw = {7, 7, 7};
+        break;  // has_raw is false: the counts are not stored
     }
     store.append_sample(session, s);
     appended.push_back(s);
@@ -575,7 +587,7 @@ TEST_F(StoreTest, MalformedRawCountsAreAnErrorNotACrash) {
   {
     Store store(path_);
     session = store.begin_session(kLive);
-    protocol::Sample s = sample(static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", "")), 0);
+    protocol::Sample s = sample(store.add_link(session, "imu0", "imubridge", ""), 0);
     s.has_raw = true;
     store.append_sample(session, s);
   }
@@ -594,7 +606,7 @@ TEST_F(StoreTest, KilledWriterLosesNothingCommitted) {
     try {
       Store store(path_, {.commit_interval = 1h});
       const std::int64_t session = store.begin_session(kLive);
-      const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+      const auto link = store.add_link(session, "imu0", "imubridge", "");
       for (int i = 0; i < kCommitted + kUncommitted; ++i) {
         if (i == kCommitted) store.commit();
         store.append_sample(session, sample(link, static_cast<std::uint64_t>(i)));
@@ -670,7 +682,7 @@ TEST_F(StoreTest, FullDiskAtCommitLosesOnlyTheBatchAndSaysSo) {
   {
     Store store(path_, {.commit_interval = 1h});
     const std::int64_t session = store.begin_session(kLive);
-    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    const auto link = store.add_link(session, "imu0", "imubridge", "");
     for (std::uint64_t seq = 0; seq < 10; ++seq) store.append_sample(session, sample(link, seq));
     store.commit();
     for (std::uint64_t seq = 10; seq < 35; ++seq) store.append_sample(session, sample(link, seq));
@@ -723,7 +735,7 @@ TEST_F(StoreTest, ReadOnlyStoreNeverChangesTheFile) {
   {
     Store store(path_);
     session = store.begin_session(kLive);
-    const auto link = static_cast<std::uint32_t>(store.add_link(session, "imu0", "imubridge", ""));
+    const auto link = store.add_link(session, "imu0", "imubridge", "");
     store.append_sample(session, sample(link, 0));
     store.append_chunk(session, link, Direction::rx, 1, 2, std::vector<std::uint8_t>{1, 2});
   }
