@@ -1,5 +1,6 @@
 #include "replay/euroc_import.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -136,6 +137,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   EurocImportResult result;
   result.imu.path = options.dir / "mav0" / "imu0" / "data.csv";
   std::ifstream imu = open_input(result.imu.path);
+  const std::uint64_t imu_size = options.progress ? fs::file_size(result.imu.path) : 0;
   std::optional<ReferenceFile> reference = options.reference;
   if (const fs::path gt = options.dir / "mav0" / "state_groundtruth_estimate0" / "data.csv";
       !reference && fs::exists(gt)) {
@@ -200,10 +202,19 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         axes_accel.emplace_back(accel[0], accel[1], accel[2]);
         axes_gyro.emplace_back(gyro[0], gyro[1], gyro[2]);
         store.commit_if_due(std::chrono::steady_clock::now());
+        if (options.progress && result.imu.rows % kImportProgressEvery == 0 && !imu.eof()) {
+          const std::streamoff at = imu.tellg();
+          if (at >= 0) {
+            options.progress({.bytes_read = std::min(static_cast<std::uint64_t>(at), imu_size),
+                              .bytes_total = imu_size,
+                              .samples = result.imu.rows});
+          }
+        }
         return std::nullopt;
       },
       result.imu.skipped);
   if (!recording) throw std::invalid_argument(no_rows_message(result.imu));
+  if (options.progress) options.progress({.bytes_read = imu_size, .bytes_total = imu_size, .samples = result.imu.rows});
 
   engine.finish_link(0, *recording, last_t, last_t);
   engine.finish();

@@ -10,6 +10,7 @@
 
 #include "estimator/imu_axes.hpp"
 #include "protocol/calibration.hpp"
+#include "replay/import_progress.hpp"
 #include "replay/text_table.hpp"
 #include "store/store.hpp"
 
@@ -37,6 +38,8 @@ struct EurocImportOptions {
   // How the IMU's axes sit in the body (estimator::parse_imu_axes), recorded in the link's config. EuRoC's ADIS16448
   // is mounted x up: "x-up"; "auto" detects it from gravity whenever the session is read.
   std::string imu_axes = "auto";
+  // Hears how far reading the IMU file (mav0/imu0/data.csv) is. Optional.
+  ImportProgressCallback progress{};
 };
 
 struct ImportedFile {

@@ -417,6 +417,14 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   for (std::size_t i = 0; i < log.records.size(); ++i) {
     engine.on_chunk(0, recording, log.frame(log.records[i]), mono_ns[i], ns(log.records[i].time_us));
     store.commit_if_due(std::chrono::steady_clock::now());
+    if (options.progress && (i + 1) % kImportProgressEvery == 0) {
+      options.progress({.bytes_read = log.records[i].offset + tlog::kTimeSize + log.records[i].size,
+                        .bytes_total = log.bytes.size(),
+                        .samples = samples.t.size()});
+    }
+  }
+  if (options.progress) {
+    options.progress({.bytes_read = log.bytes.size(), .bytes_total = log.bytes.size(), .samples = samples.t.size()});
   }
   const std::int64_t end_mono = mono_ns.back();
   const std::int64_t end_wall = ns(log.records.back().time_us);

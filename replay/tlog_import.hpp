@@ -11,6 +11,7 @@
 #include <string>
 
 #include "estimator/imu_axes.hpp"
+#include "replay/import_progress.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::replay {
@@ -24,6 +25,8 @@ struct TlogImportOptions {
   std::optional<double> accel_lsb{}, gyro_lsb{};
   // Only this message's IMUs are candidates ("SCALED_IMU2", ...); default: every IMU message.
   std::optional<std::string> imu_message{};
+  // Hears how far the recording of the file's records is (bytes up to the end of the last record recorded). Optional.
+  ImportProgressCallback progress{};
 };
 
 struct TlogImportResult {

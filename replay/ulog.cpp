@@ -156,7 +156,8 @@ Format parse_format(std::string_view text) {
 
 class Reader {
  public:
-  explicit Reader(std::span<const std::uint8_t> bytes) : bytes_(bytes) {}
+  Reader(std::span<const std::uint8_t> bytes, const ImportProgressCallback& progress)
+      : bytes_(bytes), progress_(progress) {}
 
   Log read() {
     read_header();
@@ -188,6 +189,8 @@ class Reader {
 
  private:
   std::span<const std::uint8_t> bytes_;
+  const ImportProgressCallback& progress_;
+  std::size_t until_progress_ = kImportProgressEvery;
   Log log_;
   std::map<std::uint16_t, std::size_t> subscriptions_;  // msg_id -> index in log_.topics
   bool in_data_ = false;  // past the definitions: the first subscription starts the data section
@@ -236,6 +239,10 @@ class Reader {
       if (appended) ++log_.appended_messages;
       if (!message(type, body, pos, appended)) return false;
       pos += kMessageHeaderSize + size;
+      if (--until_progress_ == 0) {
+        until_progress_ = kImportProgressEvery;
+        if (progress_) progress_({.bytes_read = pos, .bytes_total = bytes_.size()});
+      }
     }
     return true;
   }
@@ -401,6 +408,9 @@ class Reader {
     Topic topic{.name = name, .multi_id = multi_id, .record_size = format.size,
                 .droppable_padding = format.trailing_padding};
     flatten(format, "", 0, 0, topic.leaves);
+    if (const auto t = topic.leaf("timestamp"); t && topic.leaves[*t].type == BaseType::uint64) {
+      topic.timestamp_offset = topic.leaves[*t].offset;
+    }
     // A msg_id reused for the same topic (appended data subscribing again) keeps adding to its records.
     for (std::size_t i = 0; i < log_.topics.size(); ++i) {
       if (log_.topics[i].name == topic.name && log_.topics[i].multi_id == multi_id &&
@@ -456,6 +466,7 @@ double Topic::value(std::size_t record, std::size_t leaf) const {
 }
 
 std::uint64_t Topic::timestamp(std::size_t record) const {
+  if (timestamp_offset) return load<std::uint64_t>(data.data() + record * record_size + *timestamp_offset);
   const auto t = leaf("timestamp");
   if (!t || leaves[*t].type != BaseType::uint64) return 0;
   return load<std::uint64_t>(data.data() + record * record_size + leaves[*t].offset);
@@ -468,14 +479,21 @@ const Topic* Log::topic(std::string_view name, std::uint8_t multi_id) const {
   return nullptr;
 }
 
-Log parse(std::span<const std::uint8_t> bytes) { return Reader(bytes).read(); }
+Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& progress) {
+  return Reader(bytes, progress).read();
+}
 
-Log read_file(const std::filesystem::path& path) {
+Log read_file(const std::filesystem::path& path, const ImportProgressCallback& progress) {
   std::ifstream in(path, std::ios::binary);
   if (!std::filesystem::is_regular_file(path) || !in) throw ParseError(path.string() + ": cannot be read");
-  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // One read of the whole file: a byte at a time through istreambuf_iterator cost as much as parsing it.
+  std::vector<std::uint8_t> bytes(std::filesystem::file_size(path));
+  in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  if (in.bad() || static_cast<std::size_t>(in.gcount()) != bytes.size()) {
+    throw ParseError(path.string() + ": cannot be read");
+  }
   try {
-    return parse(bytes);
+    return parse(bytes, progress);
   } catch (const ParseError& e) {
     throw ParseError(path.string() + ": " + e.what());
   }

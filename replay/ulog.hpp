@@ -16,6 +16,8 @@
 #include <string_view>
 #include <vector>
 
+#include "replay/import_progress.hpp"
+
 namespace imubridge::replay::ulog {
 
 // Whatever keeps a file from being read at all: not a ULog, a broken header, flag bits or definition. One line.
@@ -59,6 +61,8 @@ struct Topic {
   std::size_t droppable_padding = 0;  // trailing padding bytes, which data messages may leave out
   std::vector<std::uint8_t> data{};  // record_size bytes per record, trailing padding filled with zeros
   std::uint64_t appended_records = 0;  // of them, read from appended data
+  // Where the uint64 "timestamp" field lies in a record; set by the reader, looked up by name when not.
+  std::optional<std::size_t> timestamp_offset{};
 
   std::size_t size() const { return record_size == 0 ? 0 : data.size() / record_size; }
   std::optional<std::size_t> leaf(std::string_view name) const;
@@ -110,7 +114,8 @@ struct Log {
 
 // Throws ParseError when the file is not a ULog or its header, flag bits or definitions are broken. Damage in the
 // data section (a truncated last message, a message cut by appended data) stops reading there: Log::damage says so.
-Log parse(std::span<const std::uint8_t> bytes);
-Log read_file(const std::filesystem::path& path);
+// `progress`, when given, hears every kImportProgressEvery messages how far reading is (samples 0).
+Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& progress = {});
+Log read_file(const std::filesystem::path& path, const ImportProgressCallback& progress = {});
 
 }  // namespace imubridge::replay::ulog

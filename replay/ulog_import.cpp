@@ -238,7 +238,8 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
     throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
   }
   const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
-  const ulog::Log log = ulog::read_file(options.file);
+  const ulog::Log log = ulog::read_file(options.file, options.progress);
+  const std::uint64_t file_size = options.progress ? std::filesystem::file_size(options.file) : 0;
   const std::string file = options.file.string();
 
   UlogImportResult result;
@@ -296,7 +297,12 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
     axes_accel.emplace_back(row.accel[0], row.accel[1], row.accel[2]);
     axes_gyro.emplace_back(row.gyro[0], row.gyro[1], row.gyro[2]);
     store.commit_if_due(std::chrono::steady_clock::now());
+    if (options.progress && result.samples % kImportProgressEvery == 0) {
+      options.progress({.bytes_read = file_size, .bytes_total = file_size, .samples = result.samples});
+    }
   }
+  if (options.progress)
+    options.progress({.bytes_read = file_size, .bytes_total = file_size, .samples = result.samples});
   result.first_us = rows.front().t_us;
   result.last_us = rows.back().t_us;
   std::int64_t end = ns(result.last_us);

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "estimator/imu_axes.hpp"
+#include "replay/import_progress.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::replay {
@@ -21,6 +22,9 @@ struct UlogImportOptions {
   double gyro_lsb = 1.1e-3;      // rad/s per count
   std::string imu_axes = "frd";  // PX4 reports its IMU in the body's FRD axes
   bool reference = true;         // vehicle_attitude + vehicle_local_position into the reference table
+  // Hears how far the import is: the file's bytes while it is parsed, then the samples as they are recorded (at
+  // bytes_read == bytes_total). Optional.
+  ImportProgressCallback progress{};
 };
 
 struct UlogImportResult {

@@ -2,6 +2,9 @@
 // as a telemetry log and imported gives the samples and the trajectory the simulator recorded itself (`sim --db`);
 // the same seed writes the same file; a truncated log imports up to the damage and says so; garbage is one line.
 #include <gtest/gtest.h>
+#include <pty.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -55,6 +58,10 @@ TEST(TlogCli, ASimulatedFlightRoundTripsThroughATlog) {
             std::string::npos)
       << r.err;
   EXPECT_EQ(r.err.find("warning"), std::string::npos) << r.err;
+  // stderr is a file here, no terminal: no progress line, not even an empty one.
+  EXPECT_EQ(r.err.find('\r'), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("importing"), std::string::npos) << r.err;
+  EXPECT_TRUE(r.err.starts_with("imported 600 IMU samples")) << r.err;
 
   // The simulator's own recording of the same flight: the samples it decoded and its truth at every sample.
   r = run_imubridge(std::string(kFlight) + " --db " + db);
@@ -109,6 +116,42 @@ TEST(TlogCli, ATruncatedLogImportsUpToTheDamageAndSaysSo) {
                        " (after record 719): the last record, cut short (52 bytes of its 82; the file ends)"),
             std::string::npos)
       << r.err;
+}
+
+// On a terminal the import draws its progress line, ended before the summary.
+TEST(TlogCli, ImportShowsItsProgressOnATerminal) {
+  TempDir dir;
+  const std::string tlog = (dir / "flight.tlog").string(), db = (dir / "flights.db").string();
+  ASSERT_EQ(run_imubridge(std::string(kFlight) + " --tlog " + tlog).exit_code, 0);
+  int master = -1, slave = -1;
+  ASSERT_EQ(::openpty(&master, &slave, nullptr, nullptr, nullptr), 0);
+  const std::string out = (dir / "out.txt").string();
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::close(master);
+    ::dup2(slave, STDERR_FILENO);
+    ::close(slave);
+    ::execl("/bin/sh", "sh", "-c",
+            (std::string(IMUBRIDGE_BIN) + " import tlog " + tlog + " --db " + db + " >" + out + " </dev/null").c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::close(slave);
+  std::string err;
+  char buffer[4096];
+  for (ssize_t n; (n = ::read(master, buffer, sizeof buffer)) > 0;) err.append(buffer, static_cast<std::size_t>(n));
+  ::close(master);  // read() ends with EIO once the program, the slave's last holder, has exited
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << err;
+  const std::size_t line = err.find("importing flight.tlog 100% ");
+  ASSERT_NE(line, std::string::npos) << err;
+  const std::size_t summary = err.find("imported 600 IMU samples");
+  ASSERT_NE(summary, std::string::npos) << err;
+  EXPECT_LT(line, summary);
+  EXPECT_NE(err.substr(line, summary - line).find('\n'), std::string::npos) << err;  // the summary on a line of its own
+  EXPECT_GT(last_line_number(slurp(out)), 0);
 }
 
 TEST(TlogCli, GarbageIsRefusedInOneLine) {

@@ -6,6 +6,7 @@
 
 #include "daemon/command.hpp"
 #include "daemon/config.hpp"
+#include "daemon/import_progress_line.hpp"
 #include "replay/euroc_import.hpp"
 #include "replay/tlog_import.hpp"
 #include "replay/ulog_import.hpp"
@@ -40,7 +41,10 @@ int run_import_ulog(const ImportCommandOptions& o) {
   if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
   if (o.imu_axes_given) options.imu_axes = o.imu_axes;
   store::Store store(o.db);
+  ImportProgressLine progress(o.dir);
+  options.progress = progress.callback();
   const auto r = replay::import_ulog(store, options);
+  progress.finish();
   std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
                static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
@@ -87,7 +91,10 @@ int run_import_tlog(const ImportCommandOptions& o) {
   if (o.imu_axes_given) options.imu_axes = o.imu_axes;
   if (!o.imu_message.empty()) options.imu_message = o.imu_message;
   store::Store store(o.db);
+  ImportProgressLine progress(o.dir);
+  options.progress = progress.callback();
   const auto r = replay::import_tlog(store, options);
+  progress.finish();
   std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
                static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
@@ -141,7 +148,10 @@ int run_import(const ImportCommandOptions& o) {
       .dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb, .imu_axes = o.imu_axes};
   if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
   store::Store store(o.db);
+  ImportProgressLine progress(o.dir);  // the bytes are those of its mav0/imu0/data.csv
+  options.progress = progress.callback();
   const auto r = replay::import_euroc(store, options);
+  progress.finish();
   std::fprintf(stderr, "imported %llu IMU rows of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.imu.rows), r.imu.path.c_str(), o.db.c_str(),
                static_cast<long long>(r.session));
