@@ -53,6 +53,7 @@ struct LinkDecoder::Impl {
   protocol::Calibration calibration;
   SourceResolver resolve_source;
   std::optional<protocol::mavlink::ImuSource> mavlink_imu;
+  std::optional<MavlinkImuLock> lock{};
   std::variant<ImuLink, XbeeLink, MavlinkLink> link;
   std::uint64_t frames_without_sample = 0;
 
@@ -92,7 +93,11 @@ struct LinkDecoder::Impl {
     for (const auto& message : l.messages) {
       const std::uint64_t sequence = l.sequences.unwrap(message);
       auto sample = protocol::mavlink::to_sample(message, &calibration);
-      if (sample && mavlink_imu && protocol::mavlink::imu_source(message) != mavlink_imu) sample.reset();
+      if (sample && (mavlink_imu || lock)) {
+        const std::optional<protocol::mavlink::ImuSource> source = protocol::mavlink::imu_source(message);
+        if (!mavlink_imu && source && lock->admits(*source)) mavlink_imu = source;  // the first IMU heard
+        if (source != mavlink_imu) sample.reset();
+      }
       if (!sample) {
         ++frames_without_sample;
         continue;
@@ -109,7 +114,7 @@ LinkDecoder::LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id,
                          const protocol::Calibration& calibration, SourceResolver resolve_source,
                          std::optional<protocol::mavlink::ImuSource> mavlink_imu)
     : impl_(std::make_unique<Impl>(
-          Impl{format, link_id, calibration, std::move(resolve_source), mavlink_imu, ImuLink{}, 0})) {
+          Impl{format, link_id, calibration, std::move(resolve_source), mavlink_imu, std::nullopt, ImuLink{}, 0})) {
   if (!calibration.valid()) throw std::invalid_argument("invalid calibration (axis map, signs or scales)");
   switch (format) {
     case protocol::WireFormat::imubridge:
@@ -129,6 +134,14 @@ LinkDecoder::LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id,
 LinkDecoder::~LinkDecoder() = default;
 LinkDecoder::LinkDecoder(LinkDecoder&&) noexcept = default;
 LinkDecoder& LinkDecoder::operator=(LinkDecoder&&) noexcept = default;
+
+void LinkDecoder::lock_mavlink_imu(const MavlinkImuLock& lock) { impl_->lock = lock; }
+std::optional<protocol::mavlink::ImuSource> LinkDecoder::mavlink_imu() const { return impl_->mavlink_imu; }
+
+std::span<const protocol::mavlink::Message> LinkDecoder::mavlink_messages() const {
+  const auto* l = std::get_if<MavlinkLink>(&impl_->link);
+  return l ? std::span<const protocol::mavlink::Message>(l->messages) : std::span<const protocol::mavlink::Message>();
+}
 
 void LinkDecoder::feed(std::span<const std::uint8_t> chunk, std::int64_t recv_mono_ns,
                        std::vector<protocol::Sample>& out) {

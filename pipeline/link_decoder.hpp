@@ -19,6 +19,18 @@
 
 namespace imubridge::pipeline {
 
+// Which IMU a MAVLink link keeps to when it is not named in full: the first IMU heard that this admits (any IMU
+// message, or one message, and for HIGHRES_IMU and RAW_IMU one `id`). A live link locks on it (docs/protocol.md,
+// "A live MAVLink link"); the lock is a pure function of the bytes, so replay of the same chunks locks on the same IMU.
+struct MavlinkImuLock {
+  std::optional<std::uint32_t> msgid{};  // none: any IMU message
+  std::optional<std::uint8_t> id{};      // none: any id
+  bool admits(const protocol::mavlink::ImuSource& source) const {
+    return (!msgid || *msgid == source.msgid) && (!id || *id == source.id);
+  }
+  friend bool operator==(const MavlinkImuLock&, const MavlinkImuLock&) = default;
+};
+
 class LinkDecoder {
  public:
   // On an XBee link every radio (64-bit source address) is a sample stream of its own; the resolver gives the link id
@@ -32,6 +44,15 @@ class LinkDecoder {
   ~LinkDecoder();
   LinkDecoder(LinkDecoder&&) noexcept;
   LinkDecoder& operator=(LinkDecoder&&) noexcept;
+
+  // From now on a MAVLink link without a fixed IMU takes samples only from the first IMU `lock` admits; IMU
+  // messages before it and from other IMUs count as frames without a sample.
+  void lock_mavlink_imu(const MavlinkImuLock& lock);
+  // The one IMU a MAVLink link takes samples from: the fixed one, or the one it locked on; none before that.
+  std::optional<protocol::mavlink::ImuSource> mavlink_imu() const;
+
+  // A MAVLink link's messages of the last feed() or finish(), each whole and checked; empty on other links.
+  std::span<const protocol::mavlink::Message> mavlink_messages() const;
 
   // Appends the samples that `chunk` completes, stamped with the chunk's receive time.
   void feed(std::span<const std::uint8_t> chunk, std::int64_t recv_mono_ns, std::vector<protocol::Sample>& out);

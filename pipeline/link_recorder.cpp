@@ -35,11 +35,18 @@ LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64
           },
           mavlink_imu) {}
 
+void LinkRecorder::lock_mavlink_imu(const MavlinkImuLock& lock) {
+  decoder_.lock_mavlink_imu(lock);
+  lock_pending_ = !decoder_.mavlink_imu();
+}
+
 void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
                             std::vector<protocol::Sample>& samples) {
   store_.append_chunk(session_, link_id_, store::Direction::rx, recv_mono_ns, recv_wall_ns, bytes);
   const std::size_t first = samples.size();
   decoder_.feed(bytes, recv_mono_ns, samples);
+  record_lock(recv_mono_ns, recv_wall_ns);
+  record_reference(recv_mono_ns, false);
   store_samples(first, samples);
   record_losses(recv_mono_ns, recv_wall_ns);
 }
@@ -47,6 +54,8 @@ void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t re
 void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& samples) {
   const std::size_t first = samples.size();
   decoder_.finish(mono_ns, samples);
+  record_lock(mono_ns, wall_ns);
+  record_reference(mono_ns, true);
   store_samples(first, samples);
   record_losses(mono_ns, wall_ns);
   nlohmann::json counters;
@@ -58,6 +67,34 @@ void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vecto
                                  .kind = "counters",
                                  .count = 1,
                                  .detail = counters.dump()});
+}
+
+void LinkRecorder::record_mavlink_reference(const MavlinkReference::Choice& choice) { reference_.emplace(choice); }
+
+void LinkRecorder::record_reference(std::int64_t mono_ns, bool at_end) {
+  if (!reference_) return;
+  reference_rows_.clear();
+  if (const auto imu = decoder_.mavlink_imu()) reference_->prefer_sender({imu->sysid, imu->compid});
+  for (const protocol::mavlink::Message& m : decoder_.mavlink_messages()) {
+    reference_->on_message(m, mono_ns, reference_rows_);
+  }
+  if (at_end) reference_->finish(reference_rows_);
+  for (const store::ReferenceRow& row : reference_rows_) store_.append_reference(session_, row);
+}
+
+// The IMU a locking link keeps to, once, when it is first heard: for people and tools reading the session (replay
+// needs no event: it locks on the same IMU from the same chunks).
+void LinkRecorder::record_lock(std::int64_t mono_ns, std::int64_t wall_ns) {
+  if (!lock_pending_ || !decoder_.mavlink_imu()) return;
+  lock_pending_ = false;
+  const protocol::mavlink::ImuSource imu = *decoder_.mavlink_imu();
+  store_.append_event(session_,
+                      {.link_id = link_id_,
+                       .mono_ns = mono_ns,
+                       .wall_ns = wall_ns,
+                       .kind = "mavlink_imu",
+                       .count = 1,
+                       .detail = "samples from " + protocol::mavlink::describe(imu) + " only: the first IMU heard"});
 }
 
 void LinkRecorder::store_samples(std::size_t first, const std::vector<protocol::Sample>& samples) {

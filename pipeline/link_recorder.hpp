@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "pipeline/link_decoder.hpp"
+#include "pipeline/mavlink_reference.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::pipeline {
@@ -24,6 +25,16 @@ class LinkRecorder {
   LinkRecorder(const LinkRecorder&) = delete;  // the decoder's radio resolver points back at this recorder
   LinkRecorder& operator=(const LinkRecorder&) = delete;
 
+  // The decoder's lock (LinkDecoder::lock_mavlink_imu); the IMU it locks on is recorded as a `mavlink_imu` event.
+  void lock_mavlink_imu(const MavlinkImuLock& lock);
+
+  // On a MAVLink link: LOCAL_POSITION_NED and the sender's attitude become the session's reference rows
+  // (MavlinkReference), stamped with their chunk's receive time. Without a chosen sender, the IMU's sender is
+  // preferred when the link has locked on its IMU by the first position.
+  void record_mavlink_reference(const MavlinkReference::Choice& choice = {});
+  // The reference being recorded (its rows skipped, its source), or nullptr.
+  const MavlinkReference* mavlink_reference() const { return reference_ ? &*reference_ : nullptr; }
+
   // Stores the chunk, decodes it, stores its samples and appends them to `samples`.
   void on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
                 std::vector<protocol::Sample>& samples);
@@ -34,6 +45,8 @@ class LinkRecorder {
 
  private:
   void record_losses(std::int64_t mono_ns, std::int64_t wall_ns);
+  void record_lock(std::int64_t mono_ns, std::int64_t wall_ns);
+  void record_reference(std::int64_t mono_ns, bool at_end);
   void store_samples(std::size_t first, const std::vector<protocol::Sample>& samples);
 
   store::Store& store_;
@@ -43,7 +56,10 @@ class LinkRecorder {
   std::string format_name_;
   std::map<std::uint64_t, std::int64_t> radio_links_;  // XBee source64 -> store link
   LinkDecoder decoder_;
-  protocol::DecoderCounters recorded_;  // losses already written as events, summed over framing layers
+  std::optional<MavlinkReference> reference_;
+  std::vector<store::ReferenceRow> reference_rows_;  // reused
+  bool lock_pending_ = false;                        // a lock whose IMU is not yet recorded
+  protocol::DecoderCounters recorded_;               // losses already written as events, summed over framing layers
 };
 
 }  // namespace imubridge::pipeline

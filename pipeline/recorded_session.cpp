@@ -9,16 +9,13 @@ RecordedSession begin_recorded_session(store::Store& store, const SessionStart& 
   for (const SessionLink& link : links) recorded.push_back(link.recorded);
   add_recorded_links(config, recorded);
   RecordedSession session;
-  session.id = store.begin_session({.kind = start.kind,
-                                    .source = start.source,
-                                    .config = config.dump(),
-                                    .started_wall_ns = start.started_wall_ns});
+  session.id = store.begin_session(
+      {.kind = start.kind, .source = start.source, .config = config.dump(), .started_wall_ns = start.started_wall_ns});
   try {
     if (!start.note.empty()) {
-      store.append_event(session.id, {.mono_ns = start.note_mono_ns,
-                                      .wall_ns = start.started_wall_ns,
-                                      .kind = "note",
-                                      .detail = start.note});
+      store.append_event(
+          session.id,
+          {.mono_ns = start.note_mono_ns, .wall_ns = start.started_wall_ns, .kind = "note", .detail = start.note});
     }
     for (const SessionLink& link : links) {
       const RecordedLink& r = link.recorded;
@@ -26,6 +23,8 @@ RecordedSession begin_recorded_session(store::Store& store, const SessionStart& 
           store.add_link(session.id, r.name, protocol::wire_format_name(r.format), link.device));
       session.recorders.push_back(std::make_unique<LinkRecorder>(store, session.id, session.store_links.back(), r.name,
                                                                  r.format, r.calibration, r.mavlink_imu));
+      if (r.mavlink_imu_lock) session.recorders.back()->lock_mavlink_imu(*r.mavlink_imu_lock);
+      if (link.mavlink_reference) session.recorders.back()->record_mavlink_reference(*link.mavlink_reference);
     }
     if (start.estimated_with) {
       session.run = store.begin_run(session.id, {.kind = start.kind,

@@ -3,10 +3,9 @@
 // session row with its configuration snapshot, which names each link's wire format, calibration and IMU axes so
 // replay can decode the bytes again; a store link and a LinkRecorder per link; and, for a writer that estimates, the
 // run its estimates go to. A session is never left half begun: if any of it fails, what began is ended.
-#include <nlohmann/json.hpp>
-
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -21,14 +20,16 @@ namespace imubridge::pipeline {
 struct SessionLink {
   RecordedLink recorded;  // name, wire format, calibration, IMU axes
   std::string device;     // for people, the store link's device: "/dev/ttyUSB0 @ 921600 baud", "EuRoC imu0, ..."
+  // A MAVLink link whose positions and attitudes become the session's reference (LinkRecorder).
+  std::optional<MavlinkReference::Choice> mavlink_reference{};
 };
 
 struct SessionStart {
-  std::string kind;            // "live", "sim", "import"
-  std::string source;          // for people: what produced it
-  nlohmann::json config;       // the writer's own snapshot; the links' recording settings are added to it
+  std::string kind;       // "live", "sim", "import"
+  std::string source;     // for people: what produced it
+  nlohmann::json config;  // the writer's own snapshot; the links' recording settings are added to it
   std::int64_t started_wall_ns = 0;
-  std::string note{};          // when set, the session's first event: what it continues, and why
+  std::string note{};  // when set, the session's first event: what it continues, and why
   std::int64_t note_mono_ns = 0;
   // A run for the estimates made while recording, holding the parameters they were made with.
   std::optional<estimator::ModelParams> estimated_with{};

@@ -60,6 +60,15 @@ void add_recorded_links(json& config, const std::vector<RecordedLink>& links) {
                           {"compid", imu->compid},
                           {"id", imu->id}};
     }
+    if (const auto& lock = link.mavlink_imu_lock) {
+      json& l = j["mavlink_imu_lock"] = json::object();
+      if (lock->msgid) {
+        const protocol::mavlink::MessageSpec* spec = protocol::mavlink::message_spec(*lock->msgid);
+        l["message"] = spec ? spec->name : "";  // for people
+        l["msgid"] = *lock->msgid;
+      }
+      if (lock->id) l["id"] = *lock->id;
+    }
   }
 }
 
@@ -80,6 +89,12 @@ std::vector<RecordedLink> recorded_links(const std::string& session_config_json)
                                                         .sysid = imu.at("sysid").get<std::uint8_t>(),
                                                         .compid = imu.at("compid").get<std::uint8_t>(),
                                                         .id = imu.at("id").get<std::uint8_t>()};
+      }
+      if (j.contains("mavlink_imu_lock")) {
+        const json& lock = j.at("mavlink_imu_lock");
+        MavlinkImuLock& l = link.mavlink_imu_lock.emplace();
+        if (lock.contains("msgid")) l.msgid = lock.at("msgid").get<std::uint32_t>();
+        if (lock.contains("id")) l.id = lock.at("id").get<std::uint8_t>();
       }
     } catch (const json::exception& e) {
       throw std::invalid_argument(std::string("session config, links: ") + e.what());

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/link_decoder.hpp"
 #include "protocol/calibration.hpp"
 #include "protocol/mavlink.hpp"
 #include "protocol/wire_format.hpp"
@@ -23,6 +24,9 @@ struct RecordedLink {
   // A MAVLink link's one IMU (LinkDecoder): set by imports of MAVLink logs, where several IMUs may be present.
   // Absent: every IMU message gives samples, as on a live link.
   std::optional<protocol::mavlink::ImuSource> mavlink_imu{};
+  // A live MAVLink link's: keep to the first IMU heard that this admits (LinkDecoder::lock_mavlink_imu), at
+  // recording and on every replay.
+  std::optional<MavlinkImuLock> mavlink_imu_lock{};
 };
 
 nlohmann::json calibration_to_json(const protocol::Calibration& c);
@@ -30,7 +34,9 @@ nlohmann::json calibration_to_json(const protocol::Calibration& c);
 protocol::Calibration calibration_from_json(const nlohmann::json& j);
 
 // {"links": [{"name": .., "protocol": .., "calibration": {..}, "imu_axes": .., "mavlink_imu": {"message": ..,
-// "msgid": .., "sysid": .., "compid": .., "id": ..} when set}, ...]} merged into `config`.
+// "msgid": .., "sysid": .., "compid": .., "id": ..} when set, "mavlink_imu_lock": {"message": .., "msgid": .., "id":
+// .., each only when set} when set},
+// ...]} merged into `config`.
 void add_recorded_links(nlohmann::json& config, const std::vector<RecordedLink>& links);
 // Throws std::invalid_argument when the snapshot has no usable "links".
 std::vector<RecordedLink> recorded_links(const std::string& session_config_json);

@@ -46,9 +46,13 @@ std::map<std::int64_t, ReplayedLink> make_decoders(const store::Store& store, co
       const auto radio = ids->find(pipeline::radio_link_name(link, source64));
       return radio == ids->end() ? kNoLink : radio->second;
     };
-    decoders.emplace(port->second, ReplayedLink{recorded.name, pipeline::LinkDecoder(
+    auto& replayed =
+        decoders
+            .emplace(port->second, ReplayedLink{recorded.name, pipeline::LinkDecoder(
                                                                    recorded.format, port->second, recorded.calibration,
-                                                                   std::move(resolve), recorded.mavlink_imu)});
+                                                                   std::move(resolve), recorded.mavlink_imu)})
+            .first->second;
+    if (recorded.mavlink_imu_lock) replayed.decoder.lock_mavlink_imu(*recorded.mavlink_imu_lock);
   }
   return decoders;
 }

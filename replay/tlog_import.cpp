@@ -16,6 +16,7 @@
 #include <variant>
 #include <vector>
 
+#include "pipeline/mavlink_reference.hpp"
 #include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
@@ -28,8 +29,6 @@ namespace {
 
 namespace mavlink = protocol::mavlink;
 
-// Attitudes further apart than this are not interpolated across for a reference row.
-constexpr std::uint64_t kMaxAttitudeGapUs = 500'000;
 constexpr std::uint32_t kStatusTextId = 253;  // STATUSTEXT: severity, then char[50] text
 constexpr double kMicroteslaPerMilligauss = 0.1;
 
@@ -77,10 +76,6 @@ bool clipped(const mavlink::Decoded& decoded) {
         }
       },
       decoded);
-}
-
-bool finite(const std::array<double, 3>& v) {
-  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
 }
 
 struct Position {
@@ -212,64 +207,21 @@ std::string imu_list(const Survey& s) {
   return text;
 }
 
-// Rows at LOCAL_POSITION_NED's times (the records' times, the session's clock), the attitude of the same sender
-// interpolated (slerp) at its device time from ATTITUDE_QUATERNION, or ATTITUDE when it sends none.
-std::vector<store::ReferenceRow> reference_rows(const Survey& s, std::optional<Component> imu_sender,
-                                                std::string& source, std::map<std::string, std::uint64_t>& skipped) {
-  std::vector<store::ReferenceRow> rows;
+// The reference's sender and attitude message, as pipeline::MavlinkReference is to take them: the IMU's sender when
+// it sends positions, else the sender of the most; ATTITUDE_QUATERNION when that sender sent any usable, else
+// ATTITUDE. Nothing when no sender sends positions.
+std::optional<pipeline::MavlinkReference::Choice> reference_choice(const Survey& s, Component imu_sender) {
   std::map<Component, std::uint64_t> senders;
   for (const Position& p : s.positions) ++senders[p.from];
-  if (senders.empty()) return rows;
-  // The IMU's sender when it sends positions, else the sender of the most.
+  if (senders.empty()) return std::nullopt;
   Component from = senders.begin()->first;
   for (const auto& [c, n] : senders) {
     if (n > senders[from]) from = c;
   }
-  if (imu_sender && senders.contains(*imu_sender)) from = *imu_sender;
+  if (senders.contains(imu_sender)) from = imu_sender;
   const auto q = s.quaternions.find(from);
-  const auto e = s.eulers.find(from);
-  const bool quaternions = q != s.quaternions.end() && !q->second.empty();
-  const std::vector<Attitude>* attitude =
-      quaternions ? &q->second : (e != s.eulers.end() && !e->second.empty() ? &e->second : nullptr);
-  source = std::string("LOCAL_POSITION_NED + ") + (quaternions ? "ATTITUDE_QUATERNION" : "ATTITUDE") + " from system " +
-           std::to_string(from.first) + ", component " + std::to_string(from.second);
-  if (const auto a = s.attitude_skipped.find(from); a != s.attitude_skipped.end()) {
-    for (const auto& [reason, count] : a->second) skipped[reason] += count;
-  }
-  for (const Position& p : s.positions) {
-    if (p.from != from) continue;
-    if (!finite(p.position)) {
-      ++skipped["position not a finite number"];
-      continue;
-    }
-    const auto key = std::pair(p.epoch, p.device_us);
-    std::optional<Eigen::Quaterniond> a;
-    if (attitude) {
-      const auto it = std::lower_bound(attitude->begin(), attitude->end(), key,
-                                       [](const Attitude& x, const auto& k) { return x.key() < k; });
-      if (it != attitude->end() && it->key() == key) {
-        a = it->q;
-      } else if (it != attitude->end() && it != attitude->begin() && std::prev(it)->epoch == p.epoch &&
-                 it->epoch == p.epoch && it->device_us - std::prev(it)->device_us <= kMaxAttitudeGapUs) {
-        const Attitude& before = *std::prev(it);
-        a = before.q.slerp(
-            static_cast<double>(p.device_us - before.device_us) / static_cast<double>(it->device_us - before.device_us),
-            it->q);
-      }
-    }
-    if (!a) {
-      ++skipped["no attitude around it"];
-      continue;
-    }
-    if (!rows.empty() && p.t_ns <= rows.back().t_ns) {
-      ++skipped["timestamp not after the previous row's"];
-      continue;
-    }
-    store::ReferenceRow& row = rows.emplace_back(
-        store::ReferenceRow{.t_ns = p.t_ns, .position = p.position, .quat_wxyz = {a->w(), a->x(), a->y(), a->z()}});
-    if (finite(p.velocity)) row.velocity = p.velocity;
-  }
-  return rows;
+  return pipeline::MavlinkReference::Choice{.sender = from,
+                                            .quaternions = q != s.quaternions.end() && !q->second.empty()};
 }
 
 // The samples the engine decodes: counted, and kept for the check of the declared IMU axes against gravity.
@@ -385,13 +337,10 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
                                                             : ": not the IMU imported")] += count;
   }
   if (const auto c = s.clipped.find(*imu); c != s.clipped.end()) result.clipped = c->second;
-  std::vector<store::ReferenceRow> reference;
-  if (options.reference) {
-    reference =
-        reference_rows(s, Component{imu->sysid, imu->compid}, result.reference_source, result.reference_skipped);
-  }
-  if (reference.empty()) result.reference_source.clear();
-  result.reference_rows = reference.size();
+  // The reference rows are built as the frames are recorded, by the recorder (as on a live link).
+  std::optional<pipeline::MavlinkReference::Choice> reference;
+  if (options.reference) reference = reference_choice(s, Component{imu->sysid, imu->compid});
+  if (reference) result.reference_source = pipeline::MavlinkReference(*reference).source();
   result.records = log.records.size();
   result.unverified = log.unverified;
   result.damage = log.damage_summary();
@@ -406,10 +355,12 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
        .config = metadata(log, s, options, *imu, result.reference_source),
        .started_wall_ns = ns(result.first_us)},
       {{.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
-        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source}});
+        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source,
+        .mavlink_reference = reference}});
   result.session = recorded.id;
   const std::int64_t link = recorded.store_links[0];
   // Every frame through the session engine without estimation: an import has no parameters (a replay estimates).
+  const pipeline::LinkRecorder& recorder = *recorded.recorders[0];
   pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
   pipeline::SessionEngine engine(nullptr);
   AxesSink samples(mono_ns.front());
@@ -431,7 +382,11 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   engine.finish_link(0, recording, end_mono, end_wall);
   engine.finish();
   result.samples = samples.t.size();
-  for (const auto& row : reference) store.append_reference(result.session, row);
+  if (const pipeline::MavlinkReference* built = recorder.mavlink_reference()) {
+    result.reference_rows = built->rows();
+    result.reference_skipped = built->skipped();
+  }
+  if (result.reference_rows == 0) result.reference_source.clear();
 
   const auto event = [&](std::optional<std::int64_t> on, std::size_t record, std::string kind, std::int64_t count,
                          std::string detail) {

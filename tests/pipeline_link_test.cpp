@@ -66,7 +66,8 @@ TEST_P(EveryFormat, EverySimulatedSampleArrivesOnceInOrder) {
       }
       for (int a = 0; a < 3; ++a) {
         // imubridge frames carry the board's counts (decoded exactly); MAVLink carries floats.
-        const double tolerance = GetParam() == WireFormat::mavlink ? 1e-5 * (1 + std::abs(want.measured.accel[a])) : 1e-12;
+        const double tolerance =
+            GetParam() == WireFormat::mavlink ? 1e-5 * (1 + std::abs(want.measured.accel[a])) : 1e-12;
         EXPECT_NEAR(got.accel[a], want.measured.accel[a], tolerance) << "sample " << i << " axis " << a;
         EXPECT_NEAR(got.gyro[a], want.measured.gyro[a], tolerance) << "sample " << i << " axis " << a;
       }
@@ -113,6 +114,38 @@ TEST(LinkDecoder, AMavlinkLinkCanKeepOneImu) {
   EXPECT_TRUE(decode(mav::ImuSource{.msgid = 116, .sysid = 2, .compid = 1, .id = 0}).first.empty());  // another sender
 }
 
+// A live link's lock: the first IMU heard that the lock admits, from then on only it; the lock is a function of the
+// bytes, so a decoder fed them again (replay) keeps to the same IMU.
+TEST(LinkDecoder, AMavlinkLinkLocksOnTheFirstImuItHears) {
+  namespace mav = protocol::mavlink;
+  std::vector<std::uint8_t> bytes;
+  std::uint8_t seq = 0;
+  for (std::uint32_t i = 0; i < 20; ++i) {
+    if (i % 4 == 0) {
+      mav::encode(mav::make_message(mav::ScaledImu2{.time_boot_ms = i, .zacc = -500}, {.seq = seq++}), bytes);
+    }
+    mav::encode(mav::make_message(mav::HighresImu{.time_usec = 1000 * i, .zacc = -9.8f}, {.seq = seq++}), bytes);
+  }
+  const auto decode = [&](MavlinkImuLock lock) {
+    LinkDecoder decoder(WireFormat::mavlink, 3, protocol::Calibration::reference_board());
+    decoder.lock_mavlink_imu(lock);
+    EXPECT_FALSE(decoder.mavlink_imu());
+    std::vector<protocol::Sample> out;
+    decoder.feed(bytes, 1, out);
+    decoder.finish(2, out);
+    return std::pair(out, decoder.mavlink_imu());
+  };
+  const auto [first, first_imu] = decode({});
+  ASSERT_EQ(first.size(), 5u);  // SCALED_IMU2 came first
+  for (const auto& s : first) EXPECT_DOUBLE_EQ(s.accel[2], -9.80665 / 2);
+  EXPECT_EQ(first_imu, (mav::ImuSource{.msgid = 116, .sysid = 1, .compid = 1, .id = 0}));
+  const auto [highres, highres_imu] = decode({.msgid = 105});
+  ASSERT_EQ(highres.size(), 20u);
+  for (const auto& s : highres) EXPECT_FLOAT_EQ(s.accel[2], -9.8f);
+  EXPECT_EQ(highres_imu, (mav::ImuSource{.msgid = 105, .sysid = 1, .compid = 1, .id = 0}));
+  EXPECT_TRUE(decode({.msgid = 105, .id = 1}).first.empty());  // no HIGHRES_IMU with id 1
+}
+
 TEST(LinkDecoder, UnknownFormatNameIsAClearError) {
   EXPECT_THROW(protocol::parse_wire_format("ubx"), std::invalid_argument);
   EXPECT_EQ(protocol::parse_wire_format("xbee-escaped"), WireFormat::xbee_escaped);
@@ -120,8 +153,8 @@ TEST(LinkDecoder, UnknownFormatNameIsAClearError) {
 
 class LinkRecorderTest : public ::testing::Test {
  protected:
-  std::filesystem::path path_ = std::filesystem::temp_directory_path() /
-                                ("imubridge_recorder_" + std::to_string(::getpid()) + ".db");
+  std::filesystem::path path_ =
+      std::filesystem::temp_directory_path() / ("imubridge_recorder_" + std::to_string(::getpid()) + ".db");
   void TearDown() override {
     for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path_.string() + suffix);
   }
