@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -26,14 +27,14 @@ struct Endpoint {
 
 // Which device a link reads: a path, or a USB identity found again after the device re-enumerates.
 struct DeviceSelector {
-  std::filesystem::path path;                // e.g. /dev/ttyUSB0, /dev/serial/by-id/..., or a pty symlink
+  std::filesystem::path path;  // e.g. /dev/ttyUSB0, /dev/serial/by-id/..., or a pty symlink
   std::optional<std::uint16_t> usb_vid, usb_pid;
-  std::optional<std::string> usb_serial;     // with vid/pid: the one radio of several identical ones
+  std::optional<std::string> usb_serial;  // with vid/pid: the one radio of several identical ones
 };
 
 struct VehicleFeedbackConfig {
   bool enabled = false;
-  double rate_hz = 10.0;                          // velocity estimates sent back to the vehicle, at most this often
+  double rate_hz = 10.0;  // velocity estimates sent back to the vehicle, at most this often
   std::uint64_t xbee_destination64 = 0x000000000000FFFF;  // XBee links: the vehicle radio (default: broadcast)
 };
 
@@ -43,16 +44,25 @@ struct LinkConfig {
   protocol::WireFormat format = protocol::WireFormat::imubridge;
   std::uint32_t baud = 115200;
   protocol::Calibration calibration = protocol::Calibration::reference_board();
-  std::string axes = "auto";  // the IMU's axes in the body (estimator::parse_imu_axes): auto detects from gravity
+  std::string axes = "auto";     // the IMU's axes in the body (estimator::parse_imu_axes): auto detects from gravity
   std::vector<Endpoint> bridge;  // raw bytes forwarded both ways (e.g. QGroundControl on udp://127.0.0.1:14550)
   VehicleFeedbackConfig feedback;
   std::chrono::milliseconds reconnect_min{200}, reconnect_max{5000};  // retry backoff after the port vanishes
+  // MAVLink links: the IMU message samples come from (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, RAW_IMU)
+  // and, for HIGHRES_IMU and RAW_IMU, its id. The link keeps to the first IMU heard that these admit (any without
+  // them), so two IMUs never interleave (docs/protocol.md, "A live MAVLink link").
+  std::optional<std::string> imu;
+  std::optional<std::uint8_t> imu_id;
+  // MAVLink links: message name -> Hz asked of the vehicle at every (re)open of the port (COMMAND_LONG
+  // MAV_CMD_SET_MESSAGE_INTERVAL), sent as system gcs_sysid, component gcs_compid. Empty: nothing is ever sent.
+  std::map<std::string, double> request_rates;
+  std::uint8_t gcs_sysid = 255, gcs_compid = 190;
 };
 
 struct StoreConfig {
   std::filesystem::path path = "/var/lib/imubridge/imubridge.db";
   std::chrono::milliseconds commit_interval{200};
-  std::uint64_t max_size_bytes = 0;            // 0: no cap; beyond it the database is rotated or recording stops
+  std::uint64_t max_size_bytes = 0;             // 0: no cap; beyond it the database is rotated or recording stops
   std::uint64_t min_free_bytes = 256ull << 20;  // keep this much free on the disk
   enum class OnFull { rotate, stop } on_full = OnFull::rotate;
 };
@@ -60,7 +70,7 @@ struct StoreConfig {
 struct OutputsConfig {
   std::optional<Endpoint> plotjuggler{};  // JSON per sample/estimate over UDP (PlotJuggler's default 127.0.0.1:9870)
   std::vector<Endpoint> line_streams{};   // newline-delimited JSON to any subscriber (tcp-listen or unix)
-  std::uint32_t decimation = 1;         // publish every Nth sample (estimates likewise)
+  std::uint32_t decimation = 1;           // publish every Nth sample (estimates likewise)
 };
 
 struct Config {
@@ -70,7 +80,7 @@ struct Config {
   std::optional<std::filesystem::path> params;  // PARAMS.json from `imubridge identify`; none: compensation only
   std::string log_level = "info";
   std::optional<std::filesystem::path> log_file;  // none: stderr (the journal under systemd); reopened on SIGHUP
-  std::chrono::seconds stats_interval{60};  // counters logged this often (and on SIGUSR1)
+  std::chrono::seconds stats_interval{60};        // counters logged this often (and on SIGUSR1)
 };
 
 }  // namespace imubridge::daemon

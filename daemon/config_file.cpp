@@ -19,6 +19,7 @@
 #include "estimator/imu_axes.hpp"
 #include "pipeline/session_config.hpp"
 #include "protocol/hex.hpp"
+#include "protocol/mavlink_messages.hpp"
 
 namespace imubridge::daemon {
 namespace {
@@ -145,6 +146,23 @@ LinkConfig read_link(TomlTable& t) {
       t.fail("axes", e.what());
     }
   }
+  if (auto imu = t.string("imu")) {
+    if (!mavlink_imu_msgid(*imu)) {
+      t.fail("imu", "must be one of 'HIGHRES_IMU', 'SCALED_IMU', 'SCALED_IMU2', 'SCALED_IMU3', 'RAW_IMU'");
+    }
+    link.imu = *imu;
+  }
+  if (auto id = t.integer("imu_id", 0, 255)) link.imu_id = static_cast<std::uint8_t>(*id);
+  if (auto rates = t.table("request_rates")) {
+    for (const auto& [key, value] : rates->raw()) {
+      const std::string name(key.str());
+      if (!mavlink_message_id(name)) rates->fail(name, "is not a MAVLink message name (e.g. HIGHRES_IMU, ATTITUDE)");
+      link.request_rates[name] = *rates->number(name, 0.1, 2000);
+    }
+    rates->finish();
+  }
+  if (auto id = t.integer("gcs_sysid", 1, 255)) link.gcs_sysid = static_cast<std::uint8_t>(*id);
+  if (auto id = t.integer("gcs_compid", 0, 255)) link.gcs_compid = static_cast<std::uint8_t>(*id);
   link.bridge = read_endpoints(t, "bridge");
   if (auto feedback = t.table("feedback")) {
     link.feedback.enabled = feedback->boolean("enabled").value_or(true);
@@ -273,6 +291,16 @@ void validate_links(const Config& config, std::string_view source) {
     if (link.reconnect_min > link.reconnect_max) {
       throw std::invalid_argument(which + ": reconnect_min_ms is above reconnect_max_ms");
     }
+    if ((link.imu || link.imu_id) && link.format != protocol::WireFormat::mavlink) {
+      throw std::invalid_argument(which + ": 'imu' and 'imu_id' are for MAVLink links");
+    }
+    if (!link.request_rates.empty() && link.format != protocol::WireFormat::mavlink) {
+      throw std::invalid_argument(which + ": 'request_rates' is for MAVLink links");
+    }
+    if (link.imu_id && link.imu && *link.imu != "HIGHRES_IMU" && *link.imu != "RAW_IMU") {
+      throw std::invalid_argument(which + ": 'imu_id' is for HIGHRES_IMU and RAW_IMU (" + *link.imu +
+                                  " has no id field)");
+    }
     try {
       VehicleFeedback check(link.format, link.feedback);
     } catch (const std::invalid_argument& e) {
@@ -319,6 +347,15 @@ std::string to_toml(const Config& config) {
         {"feedback", toml::table{{"enabled", l.feedback.enabled},
                                  {"rate_hz", l.feedback.rate_hz},
                                  {"xbee_destination64", protocol::hex(l.feedback.xbee_destination64, 8)}}}};
+    if (l.imu) link.insert("imu", *l.imu);
+    if (l.imu_id) link.insert("imu_id", static_cast<std::int64_t>(*l.imu_id));
+    if (!l.request_rates.empty()) {
+      toml::table rates;
+      for (const auto& [name, hz] : l.request_rates) rates.insert(name, hz);
+      link.insert("request_rates", std::move(rates));
+      link.insert("gcs_sysid", static_cast<std::int64_t>(l.gcs_sysid));
+      link.insert("gcs_compid", static_cast<std::int64_t>(l.gcs_compid));
+    }
     if (l.device.usb_vid) {
       toml::table usb{{"vid", static_cast<std::int64_t>(*l.device.usb_vid)},
                       {"pid", static_cast<std::int64_t>(*l.device.usb_pid)}};
@@ -333,6 +370,29 @@ std::string to_toml(const Config& config) {
   std::ostringstream out;
   out << root;
   return out.str();
+}
+
+std::optional<std::uint32_t> mavlink_imu_msgid(std::string_view name) {
+  static constexpr std::array<std::pair<std::string_view, std::uint32_t>, 5> kImus{
+      {{"HIGHRES_IMU", 105}, {"SCALED_IMU", 26}, {"SCALED_IMU2", 116}, {"SCALED_IMU3", 129}, {"RAW_IMU", 27}}};
+  for (const auto& [imu, msgid] : kImus) {
+    if (imu == name) return msgid;
+  }
+  return std::nullopt;
+}
+
+std::optional<std::uint32_t> mavlink_message_id(std::string_view name) {
+  for (const protocol::mavlink::MessageSpec& spec : protocol::mavlink::message_specs()) {
+    if (spec.name == name) return spec.id;
+  }
+  return std::nullopt;
+}
+
+std::optional<pipeline::MavlinkImuLock> mavlink_imu_lock(const LinkConfig& link) {
+  if (link.format != protocol::WireFormat::mavlink) return std::nullopt;
+  pipeline::MavlinkImuLock lock{.id = link.imu_id};
+  if (link.imu) lock.msgid = mavlink_imu_msgid(*link.imu);
+  return lock;
 }
 
 void check_baud(std::int64_t baud) {

@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "daemon/config.hpp"
+#include "pipeline/link_decoder.hpp"
 
 namespace imubridge::daemon {
 
@@ -30,6 +31,12 @@ std::string to_toml(const Config& config);
 // to 4000000. Any other rate would pass here and then fail at every reconnect, so it is refused with the
 // configuration. Throws std::invalid_argument naming the rate and the valid ones.
 void check_baud(std::int64_t baud);
+// The id of an IMU message a link's `imu` may name (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, RAW_IMU).
+std::optional<std::uint32_t> mavlink_imu_msgid(std::string_view name);
+// The id of a message of the MAVLink dialects imubridge knows (protocol/mavlink_message_specs.cpp), by name.
+std::optional<std::uint32_t> mavlink_message_id(std::string_view name);
+// A MAVLink link's IMU lock from its `imu` and `imu_id`; nothing for other links.
+std::optional<pipeline::MavlinkImuLock> mavlink_imu_lock(const LinkConfig& link);
 
 // The whole configuration, once assembled from the file and the command line: it names at least one link, and
 // validate_links() (which parse_config() runs) finds nothing wrong with its links: names, backoff, feedback.

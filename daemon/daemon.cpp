@@ -19,6 +19,7 @@
 #include "daemon/config_file.hpp"
 #include "daemon/daemon_internal.hpp"
 #include "daemon/live_sinks.hpp"
+#include "daemon/mavlink_requests.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/port_list.hpp"
 #include "daemon/serial_link.hpp"
@@ -251,6 +252,26 @@ void Daemon::on_open(Link& link, const std::string& path, bool reopened) {
                                      .detail = detail});
   });
   systemd_.status(status_line());
+  request_streams(link);
+}
+
+// The configured stream rates, asked again at every (re)open: a vehicle that rebooted forgot them.
+void Daemon::request_streams(Link& link) {
+  const LinkConfig& c = link.config;
+  if (c.format != protocol::WireFormat::mavlink || c.request_rates.empty()) return;
+  const auto [system, component] = link.vehicle.value_or(std::pair<std::uint8_t, std::uint8_t>{0, 0});
+  std::string asked;
+  for (const auto& [name, hz] : c.request_rates) {
+    const auto msgid = mavlink_message_id(name);  // checked when the config was read
+    if (!msgid) continue;
+    write_to_link(link, set_message_interval(*msgid, hz, system, component,
+                                             {.seq = link.gcs_seq++, .sysid = c.gcs_sysid, .compid = c.gcs_compid}));
+    asked += fmt::format("{}{} at {} Hz", asked.empty() ? "" : ", ", name, hz);
+  }
+  spdlog::info("link '{}': asked {} for {} (MAV_CMD_SET_MESSAGE_INTERVAL)", c.name,
+               link.vehicle ? fmt::format("system {}, component {}", system, component)
+                            : std::string("every system (not heard yet)"),
+               asked);
 }
 
 void Daemon::on_lost(Link& link, const std::string& reason) {
@@ -267,6 +288,23 @@ void Daemon::on_lost(Link& link, const std::string& reason) {
 
 void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
   engine_->on_chunk(link.index, *link.decoding, bytes, mono_now_ns(), wall_now_ns());
+  if (link.config.format == protocol::WireFormat::mavlink) {
+    const auto imu = link.current_decoder().mavlink_imu();
+    if (imu) {
+      link.vehicle.emplace(imu->sysid, imu->compid);
+    } else if (!link.vehicle) {
+      for (const auto& m : link.current_decoder().mavlink_messages()) {
+        if (m.sysid == link.config.gcs_sysid) continue;  // a ground station's own frames, echoed or bridged
+        link.vehicle.emplace(m.sysid, m.compid);
+        break;
+      }
+    }
+    if (imu && imu != link.logged_imu) {
+      link.logged_imu = imu;
+      spdlog::info("link '{}': samples from {} only: the first IMU heard{}", link.config.name,
+                   protocol::mavlink::describe(*imu), link.config.imu ? " of those 'imu' names" : "");
+    }
+  }
   record([&](Recording& r) { commits_ += r.store.commit_if_due(Clock::now()); });
 }
 

@@ -82,6 +82,7 @@ class Daemon {
   void record(Write&& write);
 
   void on_open(Link& link, const std::string& path, bool reopened);
+  void request_streams(Link& link);
   void on_lost(Link& link, const std::string& reason);
   void on_data(Link& link, std::span<const std::uint8_t> bytes);
   void write_to_link(Link& link, std::span<const std::uint8_t> bytes);

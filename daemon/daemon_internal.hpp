@@ -74,8 +74,13 @@ struct Daemon::Link {
   std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
+  std::optional<protocol::mavlink::ImuSource> logged_imu;  // the IMU a MAVLink link locked on, once logged
+  // A MAVLink link's vehicle (system, component) once heard: the IMU's sender, else the first other than us. Stream
+  // requests target it; before it is heard they are broadcast (0, 0).
+  std::optional<std::pair<std::uint8_t, std::uint8_t>> vehicle;
+  std::uint8_t gcs_seq = 0;                                // our frames' sequence numbers
   std::map<protocol::LinkId, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
-  std::unique_ptr<pipeline::ChunkDecoding> decoding;    // recorder or decoder, whichever the link has now
+  std::unique_ptr<pipeline::ChunkDecoding> decoding;       // recorder or decoder, whichever the link has now
 
   const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }
   void retire_decoder() {

@@ -59,8 +59,15 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
   std::string source = "imubridge run:";
   for (const auto& link : links_) {
     const LinkConfig& c = link->config;
-    links.push_back({.recorded = {c.name, c.format, c.calibration, c.axes},
-                     .device = fmt::format("{} @ {} baud", describe(c.device), c.baud)});
+    links.push_back({.recorded = {.name = c.name,
+                                  .format = c.format,
+                                  .calibration = c.calibration,
+                                  .imu_axes = c.axes,
+                                  .mavlink_imu_lock = mavlink_imu_lock(c)},
+                     .device = fmt::format("{} @ {} baud", describe(c.device), c.baud),
+                     .mavlink_reference = c.format == protocol::WireFormat::mavlink
+                                              ? std::optional(pipeline::MavlinkReference::Choice{})
+                                              : std::nullopt});
     source +=
         fmt::format(" {} {} ({} @ {} baud);", c.name, describe(c.device), protocol::wire_format_name(c.format), c.baud);
   }
@@ -135,6 +142,7 @@ void Daemon::use_decoders() {
           const auto id = pipeline::unrecorded_radio_id(i, static_cast<std::uint32_t>(radios.size()));
           return radios.try_emplace(source64, id).first->second;
         });
+    if (const auto lock = mavlink_imu_lock(link.config)) link.decoder->lock_mavlink_imu(*lock);
   }
 }
 

@@ -194,6 +194,45 @@ TEST(ConfigFile, LinksMustBeUnambiguous) {
             std::string::npos);
 }
 
+// A MAVLink link's one IMU: a message (and id) it keeps to, or, without them, the first IMU heard.
+TEST(ConfigFile, AMavlinkLinkNamesItsImu) {
+  const std::string mav = kLink + "protocol = \"mavlink\"\n";
+  Config c = parse_config(mav + "imu = \"HIGHRES_IMU\"\nimu_id = 1\n", "test.toml");
+  EXPECT_EQ(c.links[0].imu, "HIGHRES_IMU");
+  EXPECT_EQ(c.links[0].imu_id, 1);
+  EXPECT_EQ(mavlink_imu_lock(c.links[0]), (pipeline::MavlinkImuLock{.msgid = 105, .id = 1}));
+  EXPECT_EQ(parse_config(to_toml(c), "snapshot").links[0].imu_id, 1);
+  c = parse_config(mav, "test.toml");
+  EXPECT_EQ(mavlink_imu_lock(c.links[0]), pipeline::MavlinkImuLock{}) << "the first IMU heard";
+  EXPECT_FALSE(mavlink_imu_lock(parse_config(kLink, "test.toml").links[0]));
+  EXPECT_EQ(mavlink_imu_lock(parse_config(mav + "imu = \"SCALED_IMU2\"\n", "test.toml").links[0]),
+            (pipeline::MavlinkImuLock{.msgid = 116}));
+  EXPECT_EQ(error_of(mav + "imu = \"ATTITUDE\"\n"),
+            "test.toml:5: 'link[0].imu' must be one of 'HIGHRES_IMU', 'SCALED_IMU', 'SCALED_IMU2', 'SCALED_IMU3', "
+            "'RAW_IMU'");
+  EXPECT_NE(error_of(kLink + "imu = \"HIGHRES_IMU\"\n").find("'imu' and 'imu_id' are for MAVLink links"),
+            std::string::npos);
+  EXPECT_NE(error_of(mav + "imu = \"SCALED_IMU2\"\nimu_id = 1\n").find("SCALED_IMU2 has no id field"),
+            std::string::npos);
+}
+
+TEST(ConfigFile, StreamRequestsNameMessagesAndRates) {
+  const std::string mav = kLink + "protocol = \"mavlink\"\n";
+  const Config c = parse_config(mav + "request_rates = { HIGHRES_IMU = 200, ATTITUDE = 0.5 }\n", "test.toml");
+  EXPECT_EQ(c.links[0].request_rates, (std::map<std::string, double>{{"ATTITUDE", 0.5}, {"HIGHRES_IMU", 200}}));
+  EXPECT_EQ(c.links[0].gcs_sysid, 255);
+  EXPECT_EQ(c.links[0].gcs_compid, 190);
+  EXPECT_EQ(parse_config(to_toml(c), "snapshot").links[0].request_rates, c.links[0].request_rates);
+  EXPECT_EQ(error_of(mav + "request_rates = { HIGHRES = 200 }\n"),
+            "test.toml:5: 'link[0].request_rates.HIGHRES' is not a MAVLink message name (e.g. HIGHRES_IMU, ATTITUDE)");
+  EXPECT_NE(error_of(mav + "request_rates = { ATTITUDE = 5000 }\n").find("'link[0].request_rates.ATTITUDE'"),
+            std::string::npos);
+  EXPECT_NE(error_of(mav + "request_rates = { ATTITUDE = 0.01 }\n").find("'link[0].request_rates.ATTITUDE'"),
+            std::string::npos);
+  EXPECT_NE(error_of(kLink + "request_rates = { ATTITUDE = 5 }\n").find("'request_rates' is for MAVLink links"),
+            std::string::npos);
+}
+
 TEST(ConfigFile, AFileWithoutLinksIsValidUntilNothingAddsAny) {
   Config c = parse_config("[store]\npath = \"x.db\"\n", "test.toml");
   EXPECT_THROW(validate(c, "test.toml"), std::invalid_argument);
