@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <span>
 #include <stdexcept>
 #include <utility>
@@ -78,21 +79,6 @@ bool clipped(const mavlink::Decoded& decoded) {
       decoded);
 }
 
-struct Position {
-  Component from;
-  std::uint32_t epoch = 0;  // the decoder's count of restarts: device times compare within one epoch
-  std::uint64_t device_us = 0;
-  std::int64_t t_ns = 0;  // the record's time on the session's clock
-  std::array<double, 3> position{}, velocity{};
-};
-
-struct Attitude {
-  std::uint32_t epoch = 0;
-  std::uint64_t device_us = 0;
-  Eigen::Quaterniond q;
-  auto key() const { return std::pair(epoch, device_us); }
-};
-
 struct StatusText {
   std::size_t record = 0;
   std::uint8_t severity = 0;
@@ -103,9 +89,10 @@ struct StatusText {
 struct Survey {
   std::map<mavlink::ImuSource, std::uint64_t> imus, clipped;
   std::map<std::string, std::uint64_t> messages;  // by name
-  std::vector<Position> positions;
-  std::map<Component, std::vector<Attitude>> quaternions, eulers;  // ATTITUDE_QUATERNION, ATTITUDE
-  std::map<Component, std::map<std::string, std::uint64_t>> attitude_skipped;
+  // The reference's candidates (pipeline::MavlinkReference builds it): LOCAL_POSITION_NED by sender, and the
+  // senders of a usable (unit) ATTITUDE_QUATERNION.
+  std::map<Component, std::uint64_t> positions;
+  std::set<Component> quaternions;
   std::vector<StatusText> strings;
 };
 
@@ -129,18 +116,7 @@ std::string severity_name(std::uint8_t severity) {
   return severity < 8 ? kNames[severity] : "severity " + std::to_string(severity);
 }
 
-void add_attitude(std::vector<Attitude>& to, Attitude a, std::map<std::string, std::uint64_t>& skipped) {
-  if (!(std::abs(a.q.norm() - 1) <= 1e-2)) {  // also NaN: an estimator not yet initialised
-    ++skipped["attitude quaternion not of unit length"];
-  } else if (!to.empty() && a.key() <= to.back().key()) {
-    ++skipped["attitude time not after the previous one's"];
-  } else {
-    a.q.normalize();
-    to.push_back(a);
-  }
-}
-
-Survey survey(const tlog::Log& log, const std::vector<std::int64_t>& mono_ns) {
+Survey survey(const tlog::Log& log) {
   Survey s;
   mavlink::Decoder decoder;  // as the recorder's will: retransmissions dropped, restarts counted
   std::vector<mavlink::Message> out;
@@ -158,25 +134,11 @@ Survey survey(const tlog::Log& log, const std::vector<std::int64_t>& mono_ns) {
       if (const auto imu = mavlink::imu_source(m)) {
         ++s.imus[*imu];
         if (clipped(*decoded)) ++s.clipped[*imu];
-      } else if (const auto* lp = std::get_if<mavlink::LocalPositionNed>(&*decoded)) {
-        s.positions.push_back({from,
-                               m.clock_epoch,
-                               std::uint64_t{lp->time_boot_ms} * 1000,
-                               mono_ns[i],
-                               {lp->x, lp->y, lp->z},
-                               {lp->vx, lp->vy, lp->vz}});
+      } else if (std::holds_alternative<mavlink::LocalPositionNed>(*decoded)) {
+        ++s.positions[from];
       } else if (const auto* aq = std::get_if<mavlink::AttitudeQuaternion>(&*decoded)) {
-        add_attitude(
-            s.quaternions[from],
-            {m.clock_epoch, std::uint64_t{aq->time_boot_ms} * 1000, Eigen::Quaterniond(aq->q1, aq->q2, aq->q3, aq->q4)},
-            s.attitude_skipped[from]);
-      } else if (const auto* e = std::get_if<mavlink::Attitude>(&*decoded)) {
-        // ZYX intrinsic: yaw about z, then pitch about the new y, then roll about the new x; body -> NED.
-        const Eigen::Quaterniond q = Eigen::AngleAxisd(e->yaw, Eigen::Vector3d::UnitZ()) *
-                                     Eigen::AngleAxisd(e->pitch, Eigen::Vector3d::UnitY()) *
-                                     Eigen::AngleAxisd(e->roll, Eigen::Vector3d::UnitX());
-        add_attitude(s.eulers[from], {m.clock_epoch, std::uint64_t{e->time_boot_ms} * 1000, q},
-                     s.attitude_skipped[from]);
+        const Eigen::Quaterniond q(aq->q1, aq->q2, aq->q3, aq->q4);
+        if (std::abs(q.norm() - 1) <= 1e-2) s.quaternions.insert(from);  // as MavlinkReference accepts one
       }
     }
   }
@@ -211,17 +173,13 @@ std::string imu_list(const Survey& s) {
 // it sends positions, else the sender of the most; ATTITUDE_QUATERNION when that sender sent any usable, else
 // ATTITUDE. Nothing when no sender sends positions.
 std::optional<pipeline::MavlinkReference::Choice> reference_choice(const Survey& s, Component imu_sender) {
-  std::map<Component, std::uint64_t> senders;
-  for (const Position& p : s.positions) ++senders[p.from];
-  if (senders.empty()) return std::nullopt;
-  Component from = senders.begin()->first;
-  for (const auto& [c, n] : senders) {
-    if (n > senders[from]) from = c;
+  if (s.positions.empty()) return std::nullopt;
+  Component from = s.positions.begin()->first;
+  for (const auto& [c, n] : s.positions) {
+    if (n > s.positions.at(from)) from = c;
   }
-  if (senders.contains(imu_sender)) from = imu_sender;
-  const auto q = s.quaternions.find(from);
-  return pipeline::MavlinkReference::Choice{.sender = from,
-                                            .quaternions = q != s.quaternions.end() && !q->second.empty()};
+  if (s.positions.contains(imu_sender)) from = imu_sender;
+  return pipeline::MavlinkReference::Choice{.sender = from, .quaternions = s.quaternions.contains(from)};
 }
 
 // The samples the engine decodes: counted, and kept for the check of the declared IMU axes against gravity.
@@ -307,7 +265,7 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   for (std::size_t i = 0; i < log.records.size(); ++i) {
     mono_ns[i] = i == 0 ? ns(log.records[i].time_us) : std::max(mono_ns[i - 1], ns(log.records[i].time_us));
   }
-  const Survey s = survey(log, mono_ns);
+  const Survey s = survey(log);
   const std::optional<mavlink::ImuSource> imu = choose_imu(s, options, raw_calibrated);
   if (!imu) {
     std::string why;

@@ -1,11 +1,15 @@
 // Bytes -> samples for every wire format, end to end from the simulator's encoder, and the recorder's bookkeeping.
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <cmath>
 #include <filesystem>
 #include <random>
 
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/link_recorder.hpp"
+#include "pipeline/mavlink_reference.hpp"
+#include "protocol/mavlink_messages.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 
@@ -144,6 +148,45 @@ TEST(LinkDecoder, AMavlinkLinkLocksOnTheFirstImuItHears) {
   for (const auto& s : highres) EXPECT_FLOAT_EQ(s.accel[2], -9.8f);
   EXPECT_EQ(highres_imu, (mav::ImuSource{.msgid = 105, .sysid = 1, .compid = 1, .id = 0}));
   EXPECT_TRUE(decode({.msgid = 105, .id = 1}).first.empty());  // no HIGHRES_IMU with id 1
+}
+
+// The reference as frames arrive: a position waits for the first attitude at or after it, then takes the slerp of
+// the two around it (at most 0.5 s apart) from ATTITUDE_QUATERNION, which wins over ATTITUDE once sent; the sender is
+// the first to send a position (its earlier attitudes kept); other senders are ignored.
+TEST(MavlinkReference, PositionsTakeTheSendersAttitudeAroundThem) {
+  namespace mav = protocol::mavlink;
+  MavlinkReference reference;
+  std::vector<store::ReferenceRow> rows;
+  const auto feed = [&](const mav::Decoded& d, std::uint8_t sysid, std::int64_t t_ns) {
+    reference.on_message(mav::make_message(d, {.sysid = sysid}), t_ns, rows);
+  };
+  const double s = std::sqrt(0.5);  // yaw 90 degrees: (cos 45, 0, 0, sin 45)
+  feed(mav::AttitudeQuaternion{.time_boot_ms = 0, .q1 = 1}, 1, 1);
+  feed(mav::Attitude{.time_boot_ms = 0, .yaw = 1.0f}, 1, 1);  // ATTITUDE: not used, the sender sends quaternions
+  feed(mav::LocalPositionNed{.time_boot_ms = 50, .x = 5, .vx = 1}, 1, 2);
+  feed(mav::LocalPositionNed{.time_boot_ms = 50, .x = 9}, 2, 3);  // another sender
+  EXPECT_TRUE(rows.empty()) << "waits for an attitude after it";
+  EXPECT_EQ(reference.source(), "LOCAL_POSITION_NED + ATTITUDE_QUATERNION from system 1, component 1");
+  feed(mav::AttitudeQuaternion{.time_boot_ms = 100, .q1 = float(s), .q4 = float(s)}, 1, 4);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].t_ns, 2);
+  EXPECT_EQ(rows[0].position[0], 5);
+  ASSERT_TRUE(rows[0].velocity);
+  EXPECT_EQ((*rows[0].velocity)[0], 1);
+  const Eigen::Quaterniond half(Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()));
+  const Eigen::Quaterniond got(rows[0].quat_wxyz[0], rows[0].quat_wxyz[1], rows[0].quat_wxyz[2], rows[0].quat_wxyz[3]);
+  EXPECT_GT(std::abs(got.dot(half)), 1 - 1e-7);
+  feed(mav::LocalPositionNed{.time_boot_ms = 100, .x = 6}, 1, 5);  // equal time: that attitude
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_NEAR(rows[1].quat_wxyz[3], s, 1e-7);
+  feed(mav::LocalPositionNed{.time_boot_ms = 400, .x = 7}, 1, 6);
+  feed(mav::AttitudeQuaternion{.time_boot_ms = 1000, .q1 = 1}, 1, 7);  // 0.9 s after the last: too far
+  feed(mav::LocalPositionNed{.time_boot_ms = 1000, .x = 8}, 1, 7);     // equal time again
+  feed(mav::LocalPositionNed{.time_boot_ms = 2000, .x = 8}, 1, 8);     // nothing after it
+  reference.finish(rows);
+  EXPECT_EQ(rows.size(), 3u);
+  EXPECT_EQ(reference.rows(), 3u);
+  EXPECT_EQ(reference.skipped(), (std::map<std::string, std::uint64_t>{{"no attitude around it", 2}}));
 }
 
 TEST(LinkDecoder, UnknownFormatNameIsAClearError) {
