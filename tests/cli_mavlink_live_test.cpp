@@ -230,5 +230,37 @@ TEST_F(MavlinkLiveTest, StreamRequestsAreSentAtOpening) {
   EXPECT_EQ(tx, written);
 }
 
+// At a reopening the requests go again, now to the vehicle heard before the port vanished (system 1, component 1).
+TEST_F(MavlinkLiveTest, StreamRequestsGoAgainAtAReopeningToTheVehicleHeard) {
+  const Vehicle vehicle = vehicle_frames(100);
+  write_config("request_rates = { HIGHRES_IMU = 100 }\n");
+  auto pty = std::make_unique<cli::PtyPair>(tty_);
+  Process daemon({"run", "--config", config_.string()}, dir_ / "stderr");
+  ASSERT_TRUE(daemon.wait_for_log("link 'fc': reading")) << daemon.log();
+  write_paced(*pty, vehicle.frames);
+  ASSERT_TRUE(wait_for_samples(db_, 1)) << daemon.log();
+  ASSERT_TRUE(daemon.wait_for_log("samples from")) << daemon.log();
+  pty.reset();
+  ASSERT_TRUE(daemon.wait_for_log("lost /")) << daemon.log();
+  pty = std::make_unique<cli::PtyPair>(tty_);
+  ASSERT_TRUE(daemon.wait_for_log("asked system 1, component 1 for HIGHRES_IMU at 100 Hz")) << daemon.log();
+  std::vector<std::uint8_t> written(4096);
+  std::vector<mav::Message> commands;
+  mav::Decoder decoder;
+  ASSERT_TRUE(eventually([&] {
+    const ssize_t n = ::read(pty->master_fd(), written.data(), written.size());
+    if (n > 0) decoder.feed(std::span(written.data(), static_cast<std::size_t>(n)), commands);
+    return !commands.empty();
+  }));
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(), 0) << daemon.log();
+  ASSERT_EQ(commands.size(), 1u);
+  EXPECT_EQ(commands[0].msgid, 76u);
+  EXPECT_EQ(commands[0].payload[30], 1) << "target system";
+  EXPECT_EQ(commands[0].payload[31], 1) << "target component";
+  EXPECT_EQ(commands[0].seq, 1) << "the ground station's second frame";
+  EXPECT_EQ(count_of(daemon.log(), "asked every system (not heard yet) for HIGHRES_IMU at 100 Hz"), 1) << daemon.log();
+}
+
 }  // namespace
 }  // namespace imubridge::test
