@@ -59,11 +59,15 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
   std::string source = "imubridge run:";
   for (const auto& link : links_) {
     const LinkConfig& c = link->config;
+    // A MAVLink link that has locked on its IMU keeps to it in the new session (a rotation, a resumed recording),
+    // recorded as that IMU; else the session records the rule it will lock by.
+    const auto locked = c.format == protocol::WireFormat::mavlink ? link->logged_imu : std::nullopt;
     links.push_back({.recorded = {.name = c.name,
                                   .format = c.format,
                                   .calibration = c.calibration,
                                   .imu_axes = c.axes,
-                                  .mavlink_imu_lock = mavlink_imu_lock(c)},
+                                  .mavlink_imu = locked,
+                                  .mavlink_imu_lock = locked ? std::nullopt : mavlink_imu_lock(c)},
                      .device = fmt::format("{} @ {} baud", describe(c.device), c.baud),
                      .mavlink_reference = c.format == protocol::WireFormat::mavlink
                                               ? std::optional(pipeline::MavlinkReference::Choice{})
@@ -141,8 +145,11 @@ void Daemon::use_decoders() {
         [radios = std::map<std::uint64_t, protocol::LinkId>(), i](std::uint64_t source64) mutable {
           const auto id = pipeline::unrecorded_radio_id(i, static_cast<std::uint32_t>(radios.size()));
           return radios.try_emplace(source64, id).first->second;
-        });
-    if (const auto lock = mavlink_imu_lock(link.config)) link.decoder->lock_mavlink_imu(*lock);
+        },
+        link.config.format == protocol::WireFormat::mavlink ? link.logged_imu : std::nullopt);
+    if (const auto lock = mavlink_imu_lock(link.config); lock && !link.decoder->mavlink_imu()) {
+      link.decoder->lock_mavlink_imu(*lock);
+    }
   }
 }
 

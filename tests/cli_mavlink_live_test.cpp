@@ -6,6 +6,7 @@
 #include <fstream>
 #include <set>
 
+#include "pipeline/session_config.hpp"
 #include "protocol/mavlink.hpp"
 #include "protocol/mavlink_messages.hpp"
 #include "sim/frame_encoder.hpp"
@@ -260,6 +261,44 @@ TEST_F(MavlinkLiveTest, StreamRequestsGoAgainAtAReopeningToTheVehicleHeard) {
   EXPECT_EQ(commands[0].payload[31], 1) << "target component";
   EXPECT_EQ(commands[0].seq, 1) << "the ground station's second frame";
   EXPECT_EQ(count_of(daemon.log(), "asked every system (not heard yet) for HIGHRES_IMU at 100 Hz"), 1) << daemon.log();
+}
+
+// A rotation begins a new session after the link has locked: it keeps to the same IMU (recorded as "mavlink_imu"),
+// whichever IMU's message comes first in the new file.
+TEST_F(MavlinkLiveTest, ARotationKeepsTheImuTheLinkLockedOn) {
+  const Vehicle vehicle = vehicle_frames(16000);
+  const auto scaled = samples_of(vehicle.frames, mav::ScaledImu2::kId);
+  std::ofstream(config_) << "stats_interval_s = 3600\n[store]\npath = \"" << db_.string()
+                         << "\"\nmin_free_mib = 0\nmax_size_mib = 1\ncommit_interval_ms = 50\n[[link]]\nname = \"fc\"\n"
+                         << "device = \"" << tty_.string() << "\"\nprotocol = \"mavlink\"\naxes = \"frd\"\n";
+  cli::PtyPair pty(tty_);
+  Process daemon({"run", "--config", config_.string()}, dir_ / "stderr");
+  ASSERT_TRUE(daemon.wait_for_log("link 'fc': reading")) << daemon.log();
+  write_paced(pty, vehicle.frames);
+  EXPECT_EQ(pty.drain(std::chrono::seconds(20)), 0u);
+  daemon.signal(SIGTERM);
+  ASSERT_EQ(daemon.wait(), 0) << daemon.log();
+  ASSERT_GE(count_of(daemon.log(), "reached store.max_size_mib"), 1) << daemon.log();
+  int files = 0;
+  std::size_t samples = 0;
+  for (const auto& entry : fs::directory_iterator(dir_.path())) {
+    if (entry.path().extension() != ".db") continue;
+    ++files;
+    const store::Store store(entry.path(), {.read_only = true});
+    for (const auto& session : store.sessions()) {
+      std::size_t others = 0;
+      store.for_each_sample(session.id, std::nullopt, [&](const protocol::Sample& s) {
+        ++samples;
+        others += s.accel != scaled[0].accel;
+      });
+      EXPECT_EQ(others, 0u) << entry.path() << ": HIGHRES_IMU samples";
+      const auto links = pipeline::recorded_links(session.info.config);
+      ASSERT_EQ(links.size(), 1u);
+      EXPECT_TRUE(links[0].mavlink_imu || links[0].mavlink_imu_lock) << entry.path();
+    }
+  }
+  EXPECT_GE(files, 2);
+  EXPECT_GE(samples + files, scaled.size()) << "a frame cut by a rotation is lost, no more";
 }
 
 }  // namespace
