@@ -1,9 +1,9 @@
 #include "replay/tlog.hpp"
 
-#include <fstream>
 #include <iterator>
 
 #include "protocol/mavlink.hpp"
+#include "replay/file_bytes.hpp"
 
 namespace imubridge::replay::tlog {
 namespace {
@@ -130,16 +130,10 @@ Log parse(std::vector<std::uint8_t> file) {
 }
 
 Log read_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!std::filesystem::is_regular_file(path) || !in) throw ParseError(path.string() + ": cannot be read");
-  // One read of the whole file: a byte at a time through istreambuf_iterator cost more than parsing it.
-  std::vector<std::uint8_t> bytes(std::filesystem::file_size(path));
-  in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-  if (in.bad() || static_cast<std::size_t>(in.gcount()) != bytes.size()) {
-    throw ParseError(path.string() + ": cannot be read");
-  }
+  auto bytes = read_file_bytes(path);
+  if (!bytes) throw ParseError(path.string() + ": cannot be read");
   try {
-    return parse(std::move(bytes));
+    return parse(std::move(*bytes));
   } catch (const ParseError& e) {
     throw ParseError(path.string() + ": " + e.what());
   }

@@ -4,9 +4,9 @@
 #include <bit>
 #include <charconv>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <set>
+
+#include "replay/file_bytes.hpp"
 
 namespace imubridge::replay::ulog {
 namespace {
@@ -484,16 +484,10 @@ Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& pro
 }
 
 Log read_file(const std::filesystem::path& path, const ImportProgressCallback& progress) {
-  std::ifstream in(path, std::ios::binary);
-  if (!std::filesystem::is_regular_file(path) || !in) throw ParseError(path.string() + ": cannot be read");
-  // One read of the whole file: a byte at a time through istreambuf_iterator cost as much as parsing it.
-  std::vector<std::uint8_t> bytes(std::filesystem::file_size(path));
-  in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-  if (in.bad() || static_cast<std::size_t>(in.gcount()) != bytes.size()) {
-    throw ParseError(path.string() + ": cannot be read");
-  }
+  const auto bytes = read_file_bytes(path);
+  if (!bytes) throw ParseError(path.string() + ": cannot be read");
   try {
-    return parse(bytes, progress);
+    return parse(*bytes, progress);
   } catch (const ParseError& e) {
     throw ParseError(path.string() + ": " + e.what());
   }

@@ -16,12 +16,17 @@
 #include "replay/tlog.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "tests/stored_rows.hpp"
 #include "tests/temp_dir.hpp"
 
 namespace imubridge::replay {
 namespace {
 
 namespace fs = std::filesystem;
+using test::session_config;
+using test::stored_events;
+using test::stored_reference;
+using test::stored_samples;
 namespace mav = protocol::mavlink;
 using Bytes = std::vector<std::uint8_t>;
 
@@ -79,29 +84,6 @@ class TlogImport : public ::testing::Test {
     std::ofstream(path, std::ios::binary)
         .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
     return path;
-  }
-  static std::vector<protocol::Sample> samples(const store::Store& store, std::int64_t session) {
-    std::vector<protocol::Sample> out;
-    store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { out.push_back(s); });
-    return out;
-  }
-  static std::vector<store::ReferenceRow> reference(const store::Store& store, std::int64_t session) {
-    std::vector<store::ReferenceRow> out;
-    store.for_each_reference(session, [&](const store::ReferenceRow& r) { out.push_back(r); });
-    return out;
-  }
-  static std::vector<store::Event> events(const store::Store& store, std::int64_t session, std::string_view kind) {
-    std::vector<store::Event> out;
-    for (const auto& e : store.events(session)) {
-      if (e.kind == kind) out.push_back(e);
-    }
-    return out;
-  }
-  static nlohmann::json config(const store::Store& store, std::int64_t session) {
-    for (const auto& s : store.sessions()) {
-      if (s.id == session) return nlohmann::json::parse(s.info.config);
-    }
-    return nullptr;
   }
 };
 
@@ -216,7 +198,7 @@ TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
   EXPECT_EQ(r.first_us, kEpochUs);
   EXPECT_EQ(r.reference_source, "LOCAL_POSITION_NED + ATTITUDE from system 1, component 1");
 
-  const auto s = samples(store, r.session);
+  const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), f.samples.size());
   for (std::size_t i = 0; i < s.size(); ++i) {
     const sim::SimSample& want = f.samples[i];
@@ -228,7 +210,7 @@ TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
     }
   }
 
-  const auto ref = reference(store, r.session);
+  const auto ref = stored_reference(store, r.session);
   ASSERT_EQ(ref.size(), (f.samples.size() + 9) / 10);
   EXPECT_EQ(r.reference_rows, ref.size());
   for (std::size_t k = 0; k < ref.size(); ++k) {
@@ -244,7 +226,7 @@ TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
     EXPECT_LT(got.angularDistance(truth.attitude), 1e-6) << k;
   }
 
-  const auto c = config(store, r.session);
+  const auto c = session_config(store, r.session);
   EXPECT_EQ(c.at("import").at("format"), "tlog");
   EXPECT_EQ(c.at("import").at("messages").at("HIGHRES_IMU"), f.samples.size());
   EXPECT_EQ(c.at("links")[0].at("protocol"), "mavlink");
@@ -270,13 +252,13 @@ TEST_F(TlogImport, TheImuWithTheMostMessagesIsImportedAndTheOthersNamed) {
   EXPECT_EQ(r.imu_messages.at("SCALED_IMU2 from system 1, component 1"), n2);
   EXPECT_EQ(r.skipped.at("SCALED_IMU2 from system 1, component 1: not the IMU imported"), n2);
   EXPECT_EQ(r.skipped.at("SCALED_IMU3 from system 1, component 1: not the IMU imported"), n3);
-  EXPECT_EQ(events(store, r.session, "import_skipped").size(), 2u);
-  EXPECT_EQ(samples(store, r.session).size(), n);
+  EXPECT_EQ(stored_events(store, r.session, "import_skipped").size(), 2u);
+  EXPECT_EQ(stored_samples(store, r.session).size(), n);
   EXPECT_EQ(replay_session(store, r.session, {}).samples, n);  // not n + n2 + n3: the others stay out on replay too
 
   const auto second = import_tlog(store, {.file = write(f.tlog), .imu_message = "SCALED_IMU2"});
   EXPECT_EQ(second.imu_source, "SCALED_IMU2 from system 1, component 1");
-  const auto s = samples(store, second.session);
+  const auto s = stored_samples(store, second.session);
   ASSERT_EQ(s.size(), n2);
   for (std::size_t k = 0; k < s.size(); ++k) {
     const sim::SimSample& want = f.samples[2 * k];
@@ -314,7 +296,7 @@ TEST_F(TlogImport, RawImuOnlyWithItsResolutions) {
   EXPECT_THROW(import_tlog(store, {.file = write(f.tlog), .accel_lsb = 9.80665e-3}), std::invalid_argument);
   const auto r = import_tlog(store, {.file = write(f.tlog), .accel_lsb = 9.80665e-3, .gyro_lsb = 1e-3});
   EXPECT_EQ(r.imu_source, "RAW_IMU id 0 from system 1, component 1");
-  const auto s = samples(store, r.session);
+  const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), f.samples.size());
   EXPECT_NEAR(s[5].accel[2], f.samples[5].measured.accel.z(), 0.5e-3 * 9.80665 + 1e-9);
   EXPECT_NEAR(s[5].gyro[0], f.samples[5].measured.gyro.x(), 0.5e-3 + 1e-9);
@@ -337,7 +319,7 @@ TEST_F(TlogImport, ATruncatedLogImportsWhatPrecedesTheDamageAndSaysSo) {
   ASSERT_TRUE(r.damage);
   EXPECT_NE(r.damage->find("the last record, cut short (20 bytes"), std::string::npos) << *r.damage;
   EXPECT_EQ(r.damaged_bytes, 20u);
-  const auto damaged = events(store, r.session, "import_damaged");
+  const auto damaged = stored_events(store, r.session, "import_damaged");
   ASSERT_EQ(damaged.size(), 1u);
   EXPECT_EQ(damaged[0].count, 20);
   EXPECT_NE(damaged[0].detail.find("at byte " + std::to_string(whole.records[150].offset)), std::string::npos);
@@ -389,14 +371,14 @@ TEST_F(TlogImport, GapsStepsBackAndStatusTextAreEvents) {
   EXPECT_NEAR(r.gap_s, 3 + static_cast<double>(log.records[100].time_us - log.records[99].time_us) * 1e-6, 1e-9);
   EXPECT_EQ(r.time_back, 1u);
   EXPECT_EQ(r.log_events, 1u);
-  const auto log_events = events(store, r.session, "log");
+  const auto log_events = stored_events(store, r.session, "log");
   ASSERT_EQ(log_events.size(), 1u);
   EXPECT_EQ(log_events[0].detail, "warning: Battery 1 low");
-  const auto gap = events(store, r.session, "log_gap");
+  const auto gap = stored_events(store, r.session, "log_gap");
   ASSERT_EQ(gap.size(), 1u);
   EXPECT_EQ(gap[0].detail, "no record in the log for 3.0 s");
-  ASSERT_EQ(events(store, r.session, "log_time_back").size(), 1u);
-  const auto s = samples(store, r.session);
+  ASSERT_EQ(stored_events(store, r.session, "log_time_back").size(), 1u);
+  const auto s = stored_samples(store, r.session);
   for (std::size_t i = 1; i < s.size(); ++i) ASSERT_GE(s[i].recv_mono_ns, s[i - 1].recv_mono_ns) << i;
 }
 
@@ -405,7 +387,7 @@ TEST_F(TlogImport, NoReferenceWhenAskedAndAxesAsDeclared) {
   store::Store store(dir_ / "import.db");
   const auto r = import_tlog(store, {.file = write(f.tlog), .imu_axes = "flu", .reference = false});
   EXPECT_EQ(r.reference_rows, 0u);
-  EXPECT_TRUE(reference(store, r.session).empty());
+  EXPECT_TRUE(stored_reference(store, r.session).empty());
   EXPECT_TRUE(r.axes.mismatch);  // gravity on -z: FRD, not FLU
 }
 

@@ -13,10 +13,16 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "tests/stored_rows.hpp"
+
 namespace imubridge::replay {
 namespace {
 
 namespace fs = std::filesystem;
+using test::session_config;
+using test::stored_events;
+using test::stored_reference;
+using test::stored_samples;
 
 const fs::path kData = fs::path(IMUBRIDGE_SOURCE_DIR) / "tests/data/ulog";
 const fs::path kShared = fs::path(IMUBRIDGE_SOURCE_DIR) / "../shared/data/ulog";
@@ -160,29 +166,6 @@ class UlogImport : public ::testing::Test {
                                                  static_cast<std::streamsize>(bytes.size()));
     return path;
   }
-  static std::vector<protocol::Sample> samples(const store::Store& store, std::int64_t session) {
-    std::vector<protocol::Sample> out;
-    store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { out.push_back(s); });
-    return out;
-  }
-  static std::vector<store::ReferenceRow> reference(const store::Store& store, std::int64_t session) {
-    std::vector<store::ReferenceRow> out;
-    store.for_each_reference(session, [&](const store::ReferenceRow& r) { out.push_back(r); });
-    return out;
-  }
-  static std::vector<store::Event> events(const store::Store& store, std::int64_t session, std::string_view kind) {
-    std::vector<store::Event> out;
-    for (const auto& e : store.events(session)) {
-      if (e.kind == kind) out.push_back(e);
-    }
-    return out;
-  }
-  static nlohmann::json config(const store::Store& store, std::int64_t session) {
-    for (const auto& s : store.sessions()) {
-      if (s.id == session) return nlohmann::json::parse(s.info.config);
-    }
-    return nullptr;
-  }
 };
 
 TEST(UlogReader, ReadsEveryMessageTypeOfTheSpecification) {
@@ -294,7 +277,7 @@ TEST_F(UlogImport, SamplesReferenceEventsAndMetadata) {
   EXPECT_EQ(r.log_events, 2u);
   EXPECT_FALSE(r.axes.mismatch);
 
-  const auto s = samples(store, r.session);
+  const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), 100u);
   EXPECT_EQ(s[0].device_time_us, static_cast<std::int64_t>(kT0));
   EXPECT_EQ(s[0].recv_mono_ns, static_cast<std::int64_t>(kT0) * 1000);
@@ -304,7 +287,7 @@ TEST_F(UlogImport, SamplesReferenceEventsAndMetadata) {
   EXPECT_NEAR(s[99].gyro[0], 1.0, 0.55e-3);  // the appended record
   EXPECT_EQ(s[99].device_time_us, static_cast<std::int64_t>(kT0 + 400'000));
 
-  const auto ref = reference(store, r.session);
+  const auto ref = stored_reference(store, r.session);
   EXPECT_EQ(r.reference_rows, 19u);
   ASSERT_EQ(ref.size(), 19u);
   EXPECT_EQ(r.reference_skipped.at("horizontal position not valid (xy_valid false)"), 1u);
@@ -316,16 +299,16 @@ TEST_F(UlogImport, SamplesReferenceEventsAndMetadata) {
   ASSERT_TRUE(ref[1].velocity);
   EXPECT_EQ((*ref[1].velocity)[0], 5);
 
-  const auto log = events(store, r.session, "log");
+  const auto log = stored_events(store, r.session, "log");
   ASSERT_EQ(log.size(), 2u);
   EXPECT_EQ(log[0].detail, "info: [commander] Takeoff detected");
   EXPECT_EQ(log[0].mono_ns, static_cast<std::int64_t>(kT0 + 80'000) * 1000);
   EXPECT_EQ(log[1].detail, "warning (tag 7): tagged");
-  const auto dropout = events(store, r.session, "dropout");
+  const auto dropout = stored_events(store, r.session, "dropout");
   ASSERT_EQ(dropout.size(), 1u);
   EXPECT_EQ(dropout[0].detail, "the logger dropped 25 ms of data");
 
-  const auto c = config(store, r.session).at("import");
+  const auto c = session_config(store, r.session).at("import");
   EXPECT_EQ(c.at("format"), "ulog");
   EXPECT_EQ(c.at("params").at("SYS_AUTOSTART"), 4001);
   EXPECT_EQ(c.at("info").at("ver_hw"), "FMU");
@@ -337,7 +320,7 @@ TEST_F(UlogImport, NoReferenceWhenAskedAndAxesAsDeclared) {
   store::Store store(dir_ / "import.db");
   const auto r = import_ulog(store, {.file = write(synthetic().bytes), .imu_axes = "flu", .reference = false});
   EXPECT_EQ(r.reference_rows, 0u);
-  EXPECT_TRUE(reference(store, r.session).empty());
+  EXPECT_TRUE(stored_reference(store, r.session).empty());
   EXPECT_TRUE(r.axes.mismatch);  // gravity on -z at rest: FRD, not FLU
 }
 
@@ -348,7 +331,7 @@ TEST_F(UlogImport, ImportsATruncatedFileUpToTheDamageAndSaysSo) {
   ASSERT_TRUE(r.damage);
   EXPECT_GT(r.samples, 40u);
   EXPECT_LT(r.samples, 100u);
-  const auto damaged = events(store, r.session, "import_damaged");
+  const auto damaged = stored_events(store, r.session, "import_damaged");
   ASSERT_EQ(damaged.size(), 1u);
   EXPECT_NE(damaged[0].detail.find("cut short"), std::string::npos);
   // Cut inside the definitions: one line, nothing written.
@@ -417,7 +400,7 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
     EXPECT_EQ(r.dropout_ms, e.dropout_ms);
     EXPECT_EQ(r.log_events, e.strings);
     EXPECT_FALSE(r.axes.mismatch);  // gravity on -z: FRD, as declared
-    const auto s = samples(store, r.session);
+    const auto s = stored_samples(store, r.session);
     ASSERT_EQ(s.size(), e.samples);
     EXPECT_EQ(s.front().device_time_us, static_cast<std::int64_t>(e.first_us));
     EXPECT_EQ(s.back().device_time_us, static_cast<std::int64_t>(e.last_us));
@@ -431,9 +414,9 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
     // None of the three has a horizontal fix (bench and indoor logs: no GPS), so no reference row is true.
     EXPECT_EQ(r.reference_rows, 0u);
     EXPECT_EQ(r.reference_skipped.at("horizontal position not valid (xy_valid false)"), e.local_positions);
-    EXPECT_EQ(events(store, r.session, "dropout").size(), e.dropouts);
-    EXPECT_EQ(events(store, r.session, "log").size(), e.strings);
-    const auto c = config(store, r.session).at("import");
+    EXPECT_EQ(stored_events(store, r.session, "dropout").size(), e.dropouts);
+    EXPECT_EQ(stored_events(store, r.session, "log").size(), e.strings);
+    const auto c = session_config(store, r.session).at("import");
     EXPECT_EQ(c.at("params").size(), e.params);
     EXPECT_EQ(c.at("info").at("ver_hw"), e.ver_hw);
     ++imported;
