@@ -5,6 +5,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -193,6 +194,36 @@ bool beyond_range(const std::array<double, 3>& si, double lsb) {
   return false;
 }
 
+std::string seconds_text(std::uint64_t us) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f s", static_cast<double>(us) * 1e-6);
+  return text;
+}
+
+// The intervals the land detector said the vehicle was not landed, in its records' order.
+std::optional<std::vector<UlogImportResult::Interval>> airborne_intervals(const ulog::Log& log) {
+  const ulog::Topic* detector = log.topic("vehicle_land_detected");
+  if (detector == nullptr || detector->size() == 0) return std::nullopt;
+  const auto landed = detector->leaf("landed");
+  if (!landed) return std::nullopt;
+  std::vector<UlogImportResult::Interval> flights;
+  bool flying = false;
+  std::uint64_t takeoff_us = 0;
+  for (std::size_t i = 0; i < detector->size(); ++i) {
+    const std::uint64_t t = detector->timestamp(i);
+    const bool on_ground = detector->value(i, *landed) != 0.0;
+    if (!on_ground && !flying) {
+      flying = true;
+      takeoff_us = t;
+    } else if (on_ground && flying) {
+      flights.push_back({takeoff_us, t});
+      flying = false;
+    }
+  }
+  if (flying) flights.push_back({takeoff_us, detector->timestamp(detector->size() - 1)});
+  return flights;
+}
+
 std::string level_name(std::uint8_t level) {
   static const char* const kNames[] = {"emergency", "alert", "critical", "error", "warning", "notice", "info", "debug"};
   return level >= '0' && level <= '7' ? kNames[level - '0'] : "level " + std::to_string(level);
@@ -330,6 +361,14 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
           "the logger dropped " + std::to_string(d.duration_ms) + " ms of data");
     ++result.dropouts;
     result.dropout_ms += d.duration_ms;
+  }
+  result.airborne = airborne_intervals(log);
+  if (result.airborne) {
+    for (const auto& flight : *result.airborne) {
+      event(std::nullopt, ns(flight.from_us), "takeoff", 1, "vehicle_land_detected: no longer landed");
+      event(std::nullopt, ns(flight.to_us), "landing", 1,
+            "vehicle_land_detected: landed, after " + seconds_text(flight.to_us - flight.from_us) + " in the air");
+    }
   }
   const std::int64_t last = ns(result.last_us);
   for (const auto& [reason, count] : result.skipped) {

@@ -8,6 +8,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "estimator/imu_axes.hpp"
 #include "replay/import_progress.hpp"
@@ -43,6 +44,13 @@ struct UlogImportResult {
   std::uint64_t first_us = 0, last_us = 0;  // the first and last sample's ULog timestamps
   std::optional<std::string> damage;        // the file was read up to damage: what and where
   estimator::AxesResolution axes;
+  // When the vehicle flew, from PX4's land detector (vehicle_land_detected.landed): [takeoff, landing) in ULog µs,
+  // a flight still going at the log's end closing at its last record. Unset when the log has no land detector, so
+  // whether it flew is unknown (diagnose can still find the flight from the rotors' vibration).
+  struct Interval {
+    std::uint64_t from_us = 0, to_us = 0;
+  };
+  std::optional<std::vector<Interval>> airborne;
 };
 
 // Throws std::invalid_argument (ulog::ParseError among them), before writing anything, when the file cannot be read

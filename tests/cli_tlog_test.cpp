@@ -168,5 +168,17 @@ TEST(TlogCli, GarbageIsRefusedInOneLine) {
   EXPECT_NE(wrong.err.find("--protocol mavlink"), std::string::npos) << wrong.err;
 }
 
+TEST(TlogCli, ADataflashLogIsRefusedWithWhatToImportInstead) {
+  TempDir dir;
+  const std::string path = (dir / "00000001.BIN").string();
+  std::ofstream(path) << "not read anyway";
+  const std::string db = (dir / "flights.db").string();
+  const auto r = run_imubridge("import dataflash " + path + " --db " + db);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("import tlog"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(db)) << "nothing is written";
+}
+
 }  // namespace
 }  // namespace imubridge::test

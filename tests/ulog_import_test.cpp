@@ -1,7 +1,6 @@
 // PX4 ULog: the reader on a file built here message by message (nested formats, padding, every message type,
 // appended data, truncation and corrupt definitions), the import's samples, reference and events, and the PX4
 // sample logs of pyulog (tests/data/ulog, and sample.ulg from ../shared/data/ulog when present).
-#include "replay/ulog.hpp"
 #include "replay/ulog_import.hpp"
 
 #include <gtest/gtest.h>
@@ -13,6 +12,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "replay/ulog.hpp"
 #include "tests/stored_rows.hpp"
 
 namespace imubridge::replay {
@@ -44,7 +44,9 @@ class Writer {
     const auto* p = reinterpret_cast<const std::uint8_t*>(&value);
     out.insert(out.end(), p, p + sizeof value);
   }
-  static void put(std::vector<std::uint8_t>& out, std::string_view text) { out.insert(out.end(), text.begin(), text.end()); }
+  static void put(std::vector<std::uint8_t>& out, std::string_view text) {
+    out.insert(out.end(), text.begin(), text.end());
+  }
   void message(char type, const std::vector<std::uint8_t>& body) {
     put<std::uint16_t>(bytes, static_cast<std::uint16_t>(body.size()));
     bytes.push_back(static_cast<std::uint8_t>(type));
@@ -104,11 +106,13 @@ Writer synthetic() {
   w.keyed('Q', "float MC_ROLL_P", 7.0f, std::uint8_t{3});
   w.text('F', "vec3:float x;float y;float z;");
   w.text('F', "nested_topic:uint64_t timestamp;vec3[2] v;uint8_t[3] _padding0;int8_t last;uint8_t[4] _padding1;");
-  w.text('F', "sensor_combined:uint64_t timestamp;float[3] gyro_rad;int32_t accelerometer_timestamp_relative;"
-              "float[3] accelerometer_m_s2;uint8_t[4] _padding0;");
+  w.text('F',
+         "sensor_combined:uint64_t timestamp;float[3] gyro_rad;int32_t accelerometer_timestamp_relative;"
+         "float[3] accelerometer_m_s2;uint8_t[4] _padding0;");
   w.text('F', "vehicle_attitude:uint64_t timestamp;float[4] q;");
-  w.text('F', "vehicle_local_position:uint64_t timestamp;float x;float y;float z;float vx;float vy;float vz;"
-              "bool xy_valid;bool z_valid;bool v_xy_valid;bool v_z_valid;");
+  w.text('F',
+         "vehicle_local_position:uint64_t timestamp;float x;float y;float z;float vx;float vy;float vz;"
+         "bool xy_valid;bool z_valid;bool v_xy_valid;bool v_z_valid;");
   w.subscribe(0, "sensor_combined");
   w.subscribe(1, "vehicle_attitude");
   w.subscribe(2, "vehicle_local_position");
@@ -162,8 +166,8 @@ class UlogImport : public ::testing::Test {
 
   fs::path write(const std::vector<std::uint8_t>& bytes, const std::string& name = "log.ulg") {
     const fs::path path = dir_ / name;
-    std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
-                                                 static_cast<std::streamsize>(bytes.size()));
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
     return path;
   }
 };
@@ -181,8 +185,7 @@ TEST(UlogReader, ReadsEveryMessageTypeOfTheSpecification) {
   EXPECT_EQ(log.multi_info.at("hardfault"), nlohmann::json::array({"boom"}));  // from appended data
   EXPECT_EQ(log.params.at("MC_ROLL_P"), 6.5);
   EXPECT_EQ(log.params.at("SYS_AUTOSTART"), 4001);
-  EXPECT_EQ(log.default_params.at("MC_ROLL_P"),
-            (nlohmann::json{{"value", 7.0}, {"system", true}, {"airframe", true}}));
+  EXPECT_EQ(log.default_params.at("MC_ROLL_P"), (nlohmann::json{{"value", 7.0}, {"system", true}, {"airframe", true}}));
   ASSERT_EQ(log.param_changes.size(), 1u);
   EXPECT_EQ(log.param_changes[0].value, 6.0);
   EXPECT_EQ(log.param_changes[0].after_us, kT0 + 110'000);  // the attitude written just before it
@@ -352,22 +355,26 @@ struct Expected {
   const char* ver_hw;
   std::int64_t autostart;
   std::size_t hardfaults;  // 'M' hardfault_plain values, in appended data
+  int flights;             // airborne intervals by vehicle_land_detected; -1: the log has no land detector record
+  std::uint64_t takeoff_us, landing_us;  // the first one's
 };
 
+// clang-format off
 const Expected kLogs[] = {
     {"sample.ulg", 43, 493, 17070, 112614307, 181493506,
      {1.10714173, -0.486477524, -9.63039494, -0.00192494364, -0.00331021356, -0.00323856669},
      {1.14002633, -0.441030651, -9.63232517, -0.00137469545, -0.0025773237, -0.0037138944}, 4, 119, 4, 678,
-     "AUAV_X21", 10020, 0},
+     "AUAV_X21", 10020, 0, -1, 0, 0},
     {"sample_appended_multiple.ulg", 44, 750, 2373, 12262822, 21880422,
      {0.540145457, 0.321722984, -9.93630314, 0.0032860369, 0.00932722911, 0.00394874206},
      {0.541375518, 0.30004558, -9.92365265, 0.0589871854, 0.0317205563, 0.0122601017}, 0, 0, 1, 95,
-     "PX4FMU_V4PRO", 4001, 3},
+     "PX4FMU_V4PRO", 4001, 3, 0, 0, 0},
     {"sample_log_small.ulg", 72, 980, 1298, 20326716, 26822868,
      {0.00124580564, -0.154344976, -9.63424301, 0.00296838349, 0.00364623987, 0.000942496117},
      {-0.0100537231, -0.163725868, -9.56682873, 0.00388484122, -0.00303378864, 0.000779201684}, 1, 30, 3, 636,
-     "CUBEPILOT_CUBEORANGE", 13014, 0},
+     "CUBEPILOT_CUBEORANGE", 13014, 0, 1, 22673775, 23822439},
 };
+// clang-format on
 
 TEST_F(UlogImport, ThePx4SampleLogs) {
   std::size_t imported = 0;
@@ -400,6 +407,18 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
     EXPECT_EQ(r.dropout_ms, e.dropout_ms);
     EXPECT_EQ(r.log_events, e.strings);
     EXPECT_FALSE(r.axes.mismatch);  // gravity on -z: FRD, as declared
+    // PX4's land detector: sample.ulg subscribed to it and logged no record (unknown), the appended log's one record
+    // says landed, the small log lifted off once for about a second.
+    ASSERT_EQ(r.airborne.has_value(), e.flights >= 0);
+    if (r.airborne) {
+      ASSERT_EQ(r.airborne->size(), static_cast<std::size_t>(e.flights));
+      if (e.flights > 0) {
+        EXPECT_EQ(r.airborne->front().from_us, e.takeoff_us);
+        EXPECT_EQ(r.airborne->front().to_us, e.landing_us);
+      }
+    }
+    EXPECT_EQ(stored_events(store, r.session, "takeoff").size(), static_cast<std::size_t>(std::max(e.flights, 0)));
+    EXPECT_EQ(stored_events(store, r.session, "landing").size(), static_cast<std::size_t>(std::max(e.flights, 0)));
     const auto s = stored_samples(store, r.session);
     ASSERT_EQ(s.size(), e.samples);
     EXPECT_EQ(s.front().device_time_us, static_cast<std::int64_t>(e.first_us));
