@@ -65,4 +65,11 @@ std::optional<FlightSpan> detect_flight(const ImuSeries& s) {
   return out;
 }
 
+std::optional<double> share_in_flight(const TimeWindow& window, const TimeWindow& flight, const TimeWindow& data) {
+  const double start = std::max(window.start, data.start), end = std::min(window.end, data.end);
+  if (!(end > start)) return std::nullopt;
+  const double inside = std::max(0.0, std::min(end, flight.end) - std::max(start, flight.start));
+  return inside / (end - start);
+}
+
 }  // namespace imubridge::estimator

@@ -12,18 +12,23 @@
 namespace imubridge::estimator {
 
 struct FlightSpan {
-  TimeWindow window;           // s: from the first to the end of the last vibrating block
-  double quiet_level = 0.0;    // m/s^2: the quietest blocks' high-frequency accelerometer level (5th percentile)
-  double flying_level = 0.0;   // m/s^2: the loudest blocks' (95th percentile)
-  std::string description;     // one line for people
+  TimeWindow window;          // s: from the first to the end of the last vibrating block
+  double quiet_level = 0.0;   // m/s^2: the quietest blocks' high-frequency accelerometer level (5th percentile)
+  double flying_level = 0.0;  // m/s^2: the loudest blocks' (95th percentile)
+  std::string description;    // one line for people
 };
 
 // Blocks of kFlightBlockSeconds; a block flies when its level (RMS of the sample-to-sample change of the specific
 // force: the vibration band, whatever the manoeuvres) is above both the geometric mean of the quiet and flying levels
-// and a third of the flying level; the flight is the longest run of such blocks. nullopt when the recording shows no quiet part to tell apart (the levels within kMinFlightContrast of each other:
-// airborne throughout, or never) or is shorter than two blocks.
+// and a third of the flying level; the flight is the longest run of such blocks. nullopt when the recording shows no
+// quiet part to tell apart (the levels within kMinFlightContrast of each other: airborne throughout, or never) or is
+// shorter than two blocks.
 inline constexpr double kFlightBlockSeconds = 0.5;
 inline constexpr double kMinFlightContrast = 4.0;
 std::optional<FlightSpan> detect_flight(const ImuSeries& series);
+
+// The share of `window`, clipped to the data's span, that lies in `flight` (0 to 1); nullopt when the clipped window
+// is empty. A fit window mostly on the ground identifies nothing a flight model has.
+std::optional<double> share_in_flight(const TimeWindow& window, const TimeWindow& flight, const TimeWindow& data);
 
 }  // namespace imubridge::estimator

@@ -4,6 +4,7 @@
 // is the session, or with --in-flight the part the vehicle flies (estimator::detect_flight), said on stderr; evaluate
 // shares that too.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <optional>
 #include <string>
@@ -17,17 +18,40 @@
 
 namespace imubridge::cli {
 
-inline estimator::TimeWindow percent_span(const estimator::ImuSeries& series, bool in_flight) {
+// What percentages are of: the flight when --in-flight found one (said on stderr), else the whole session.
+struct PercentSpan {
+  estimator::TimeWindow window;
+  std::optional<estimator::TimeWindow> flight;
+};
+
+inline PercentSpan percent_span_of(const estimator::ImuSeries& series, bool in_flight) {
   const estimator::TimeWindow whole = estimator::data_span(series.t);
-  if (!in_flight) return whole;
+  if (!in_flight) return {whole, std::nullopt};
   if (const std::optional<estimator::FlightSpan> flight = estimator::detect_flight(series)) {
     std::fprintf(stderr, "%s: percentages are of it\n", flight->description.c_str());
-    return flight->window;
+    return {flight->window, flight->window};
   }
   std::fprintf(stderr,
                "warning: --in-flight: no part at rest to tell the flight from (the accelerometer's vibration level "
                "hardly changes); percentages are of the whole session\n");
-  return whole;
+  return {whole, std::nullopt};
+}
+
+inline estimator::TimeWindow percent_span(const estimator::ImuSeries& series, bool in_flight) {
+  return percent_span_of(series, in_flight).window;
+}
+
+// A window in seconds (or the default one) is of the session even with --in-flight: a fit that runs mostly on the
+// ground identifies nothing, so say how much of it lies outside the detected flight.
+inline void warn_outside_flight(const char* what, const estimator::TimeWindow& window,
+                                const estimator::TimeWindow& flight, const estimator::TimeWindow& data) {
+  const std::optional<double> share = estimator::share_in_flight(window, flight, data);
+  if (!share || *share >= 0.9) return;  // an empty window is refused by resolve_windows in its own words
+  std::fprintf(stderr,
+               "warning: --in-flight: the %s window %.1f-%.1f s is %.0f %% in the flight (%.1f-%.1f s); give it in "
+               "percent of the flight (e.g. --train 0:40%% --validate 40%%:)\n",
+               what, std::max(window.start, data.start), std::min(window.end, data.end), 100.0 * *share, flight.start,
+               flight.end);
 }
 
 inline void add_in_flight_flag(CLI::App& cmd, bool& in_flight) {
@@ -42,10 +66,18 @@ struct WindowArgs {
   // The windows, resolved against the series (nullopt: the command's default).
   std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> resolve(
       const estimator::ImuSeries& series) const {
-    const estimator::TimeWindow span = percent_span(series, in_flight);
+    const PercentSpan span = percent_span_of(series, in_flight);
     std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> out;
-    if (train) out.first = estimator::parse_window(*train, span);
-    if (validate) out.second = estimator::parse_window(*validate, span);
+    if (train) out.first = estimator::parse_window(*train, span.window);
+    if (validate) out.second = estimator::parse_window(*validate, span.window);
+    if (span.flight) {
+      const estimator::TimeWindow data = estimator::data_span(series.t);
+      const estimator::TimeWindow fit =
+          out.first.value_or(estimator::TimeWindow{0.0, estimator::kPaperTrainSeconds});  // identify's default
+      warn_outside_flight("fit", fit, *span.flight, data);
+      warn_outside_flight("validation", out.second.value_or(estimator::TimeWindow{fit.end, data.end}), *span.flight,
+                          data);
+    }
     return out;
   }
 };
