@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 #include "diagnose/live_model.hpp"
@@ -36,8 +37,8 @@ std::vector<Parameter> base_parameters(const ModelSetup& setup) {
     for (int axis : setup.axes) {
       const std::string a = axis_name(axis) + ".";
       out.push_back({a + "r", "m", 0.0, 0.0});
-      out.push_back({a + "beta", "rad"});
-      out.push_back({a + "alpha", "rad"});
+      out.push_back({.name = a + "beta", .unit = "rad", .periodic = true});
+      out.push_back({.name = a + "alpha", .unit = "rad", .periodic = true});
       out.push_back({a + "mu", "1/m", 0.0, 0.0});
     }
   } else {
@@ -604,6 +605,9 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   }
   out.iterations = static_cast<int>(summary.iterations.size()) - 1;
   out.converged = summary.termination_type == ceres::CONVERGENCE;
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    if (params[i].periodic) x[i] = std::remainder(x[i], 2.0 * std::numbers::pi);  // cost and Jacobian unchanged
+  }
 
   // Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same).
   out.std_errors.assign(params.size(), std::numeric_limits<double>::quiet_NaN());

@@ -239,6 +239,24 @@ TEST(Model, TheBaseModelReproducesEq14) {
   EXPECT_FALSE(f.convergence.empty());
 }
 
+TEST(Model, AnglesComeBackInOneTurnWhateverTurnTheFitStartsIn) {
+  Signals s = synthetic_signals();
+  fill_paper_accel(s);
+  const Model model(s, paper_setup(s));
+  const Range all{0, s.size()};
+  std::vector<double> start = model.base_start(all);
+  start[1] += 4.0 * std::numbers::pi;  // x.beta two turns away: the same mounting to the model
+  start[6] -= 2.0 * std::numbers::pi;  // y.alpha one turn the other way
+  const FitOutcome f = fit(model, start, all);
+  EXPECT_LT(model.rmse(f.values, all), 1e-9);
+  EXPECT_NEAR(f.values[1], 85.0 * std::numbers::pi / 180.0, 1e-6);  // x.beta, in (-pi, pi]
+  EXPECT_NEAR(f.values[2], -0.01, 1e-6);                            // x.alpha
+  for (std::size_t i : {1, 2, 5, 6}) {
+    EXPECT_GT(f.values[i], -std::numbers::pi) << model.parameters()[i].name;
+    EXPECT_LE(f.values[i], std::numbers::pi) << model.parameters()[i].name;
+  }
+}
+
 TEST(Model, FitRecoversLinearDrag) {
   Signals s = synthetic_signals();
   fill_paper_accel(s);

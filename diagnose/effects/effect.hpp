@@ -66,6 +66,9 @@ struct Parameter {
   double initial = 0.0;
   double lower = -std::numeric_limits<double>::infinity();
   double upper = std::numeric_limits<double>::infinity();
+  // An angle the model reads only through its sine and cosine: the fit reports it in (-pi, pi], where any 2 pi
+  // it wandered by means nothing.
+  bool periodic = false;
 };
 
 // Horizontal drag per body axis as a specific force, -k v - mu |v| v (estimator/drag_law.hpp), on the air velocity.
