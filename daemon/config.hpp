@@ -73,10 +73,23 @@ struct OutputsConfig {
   std::uint32_t decimation = 1;           // publish every Nth sample (estimates likewise)
 };
 
+// [sync]: the store copied into the fleet archive in PostgreSQL as it records (daemon/archive_sync.hpp). Like [mqtt],
+// only where to read the password: the configuration is recorded with each session.
+struct SyncConfig {
+  std::string to;                                      // postgresql://USER@HOST[:PORT]/DB, without a password
+  std::string station;                                 // the store's name in the archive; empty: the host's name
+  std::chrono::seconds interval{30};                   // a pass this often
+  bool chunks = false;                                 // the raw chunks too
+  std::optional<std::filesystem::path> password_file;  // the password is its first line
+  std::optional<std::string> password_env;             // or the value of this environment variable
+  friend bool operator==(const SyncConfig&, const SyncConfig&) = default;
+};
+
 struct Config {
   std::vector<LinkConfig> links;
   StoreConfig store;
   OutputsConfig outputs;
+  std::optional<SyncConfig> sync;
   std::optional<std::filesystem::path> params;  // PARAMS.json from `imubridge identify`; none: compensation only
   std::string log_level = "info";
   std::optional<std::filesystem::path> log_file;  // none: stderr (the journal under systemd); reopened on SIGHUP

@@ -13,6 +13,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "archive/pg_connection.hpp"
 #include "daemon/endpoint.hpp"
 #include "daemon/toml_table.hpp"
 #include "daemon/vehicle_feedback.hpp"
@@ -209,6 +210,28 @@ OutputsConfig read_outputs(TomlTable& t) {
   return outputs;
 }
 
+SyncConfig read_sync(TomlTable& t) {
+  SyncConfig sync;
+  const auto to = t.string("to");
+  if (!to) t.fail("", "needs 'to', the archive's URL: postgresql://USER@HOST[:PORT]/DATABASE");
+  if (!to->starts_with("postgresql://") && !to->starts_with("postgres://")) {
+    t.fail("to", "must be a postgresql:// URL");
+  }
+  if (archive::redact_url(*to) != *to || t.find("password")) {
+    t.fail(t.find("password") ? "password" : "to",
+           "holds a password, which is never written in the configuration: use password_file or password_env");
+  }
+  sync.to = *to;
+  sync.station = t.string("station").value_or("");
+  if (auto s = t.integer("interval_s", 1, 86'400)) sync.interval = std::chrono::seconds(*s);
+  if (auto chunks = t.boolean("chunks")) sync.chunks = *chunks;
+  if (auto file = t.string("password_file")) sync.password_file = *file;
+  sync.password_env = t.string("password_env");
+  if (sync.password_file && sync.password_env) t.fail("password_env", "and password_file: give one of them");
+  t.finish();
+  return sync;
+}
+
 std::string source_prefix(std::string_view source) {
   return source.empty() ? std::string() : std::string(source) + ": ";
 }
@@ -236,6 +259,7 @@ Config parse_config(std::string_view toml_text, std::string_view source) {
   if (auto params = t.string("params")) config.params = *params;
   if (auto store = t.table("store")) config.store = read_store(*store);
   if (auto outputs = t.table("outputs")) config.outputs = read_outputs(*outputs);
+  if (auto sync = t.table("sync")) config.sync = read_sync(*sync);
   if (const toml::node* links = t.find("link")) {
     const toml::array* array = links->as_array();
     // No links: `link = []`, as to_toml() writes it; toml++ does not count an empty array as one of tables.
@@ -332,6 +356,15 @@ std::string to_toml(const Config& config) {
                       {"decimation", static_cast<std::int64_t>(config.outputs.decimation)}};
   if (config.outputs.plotjuggler) outputs.insert("plotjuggler", config.outputs.plotjuggler->text);
   root.insert("outputs", std::move(outputs));
+  if (const auto& y = config.sync) {
+    toml::table sync{
+        {"to", y->to}, {"interval_s", static_cast<std::int64_t>(y->interval.count())}, {"chunks", y->chunks}};
+    if (!y->station.empty()) sync.insert("station", y->station);
+    if (y->password_file) sync.insert("password_file", y->password_file->string());
+    if (y->password_env) sync.insert("password_env", *y->password_env);
+    root.insert("sync", std::move(sync));
+  }
+
 
   toml::array links;
   for (const LinkConfig& l : config.links) {

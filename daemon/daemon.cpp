@@ -14,6 +14,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "daemon/archive_sync.hpp"
 #include "daemon/asio.hpp"
 #include "daemon/bridge.hpp"
 #include "daemon/config_file.hpp"
@@ -230,6 +231,9 @@ int Daemon::run() {
   if (auto period = systemd_.watchdog_period()) every(watchdog_timer_, *period, &Daemon::watchdog_tick);
   systemd_.ready(status_line());
   spdlog::info("running: {}", status_line());
+  // Its own thread and store connection: recording never waits for the archive. Stopped when the loop ends.
+  std::optional<ArchiveSyncThread> archive_sync;
+  if (config_.sync) archive_sync.emplace(*config_.sync, config_.store.path);
   io_.run();
   return 0;
 }

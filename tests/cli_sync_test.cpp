@@ -11,10 +11,13 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "store/sqlite.hpp"
 #include "store/store.hpp"
@@ -62,6 +65,27 @@ void record_session(const fs::path& db, int seed, double seconds, int rate_hz) {
 std::int64_t local_count(const fs::path& db, const std::string& sql) {
   const store::Database database(db, /*read_only=*/true);
   return database.query_int(sql);
+}
+
+// `imubridge <args>` as a child process, its stderr into `stderr_path`.
+pid_t spawn(const std::vector<std::string>& args, const fs::path& stderr_path) {
+  const pid_t pid = ::fork();
+  if (pid != 0) return pid;
+  if (!std::freopen(stderr_path.c_str(), "w", stderr) || !std::freopen("/dev/null", "w", stdout)) ::_exit(127);
+  std::vector<char*> argv{const_cast<char*>(IMUBRIDGE_BIN)};
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  ::execv(IMUBRIDGE_BIN, argv.data());
+  ::_exit(127);
+}
+
+// Polls `done` until it holds, for at most `limit`; returns whether it did.
+bool eventually(const std::function<bool()>& done, std::chrono::seconds limit = std::chrono::seconds(20)) {
+  for (const auto deadline = std::chrono::steady_clock::now() + limit; !done();) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
 }
 
 // Every value of a session, bit for bit, in the order a reader gets it, with links and runs by name and order
@@ -211,16 +235,7 @@ TEST(CliSync, ASyncKilledHalfWayResumesWithoutLossOrDuplicates) {
   // Killed once some batches are in and the copy is well under way: where exactly is drawn from a fixed seed.
   std::mt19937 random(20240611);
   const std::int64_t kill_after = std::uniform_int_distribution<std::int64_t>(1000, samples / 2)(random);
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    ::freopen("/dev/null", "w", stderr);
-    std::vector<char*> argv{const_cast<char*>(IMUBRIDGE_BIN)};
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(IMUBRIDGE_BIN, argv.data());
-    ::_exit(127);
-  }
+  const pid_t pid = spawn({std::begin(args), std::end(args)}, "/dev/null");
   std::int64_t copied = 0;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (std::chrono::steady_clock::now() < deadline) {
@@ -330,6 +345,58 @@ TEST(CliSync, ASessionStillRecordingIsSyncedAsFarAsItGoesThenFinished) {
                                   "SELECT count(*) FROM samples WHERE ay = 0 AND "
                                   "float8send(ay) = float8send('-0'::float8)")),
             "700");
+}
+
+// The daemon's [sync]: started while the archive is down (one line per attempt, recording unaffected), it syncs
+// once the archive is up, while recording; what it had not sent when it stopped, the next sync sends.
+TEST(CliSync, TheDaemonSyncsWhileRecordingAndWaitsForTheArchive) {
+  TempDir dir;
+  PostgresServer archive;  // its own: this test stops and starts it
+  archive.create_database("fleet");
+  archive.stop();
+  const fs::path db = dir / "live.db";
+  {
+    std::ofstream config(dir / "imubridge.toml");
+    config << "[store]\npath = \"" << db.string() << "\"\n[sync]\nto = \"" << archive.url("fleet")
+           << "\"\nstation = \"gs1\"\ninterval_s = 1\n";
+  }
+  const fs::path pty = dir / "imu";
+  const pid_t sim = spawn({"sim", "--pty", pty.string(), "--duration", "60", "--speed", "2"}, dir / "sim.log");
+  ASSERT_TRUE(eventually([&] { return fs::exists(pty); }));
+  const pid_t run =
+      spawn({"run", "--config", (dir / "imubridge.toml").string(), "--link", "imu=" + pty.string() + ":imubridge"},
+            dir / "run.log");
+  const auto log = [&] { return slurp(dir / "run.log"); };
+  ASSERT_TRUE(eventually([&] { return log().find("archive sync: " + archive.url("fleet")) != std::string::npos; }))
+      << log();
+  const std::string failure = log().substr(log().find("archive sync: " + archive.url("fleet")));
+  EXPECT_NE(failure.find("Connection refused"), std::string::npos) << failure;
+  EXPECT_NE(failure.find("; retrying in 1 s\n"), std::string::npos) << "one line per failed pass: " << failure;
+
+  archive.start();
+  ASSERT_TRUE(eventually([&] { return log().find("reachable again") != std::string::npos; })) << log();
+  const auto archived = [&] {
+    return std::stoll(trimmed(archive.psql("fleet", "SELECT count(*) FROM samples WHERE station = 'gs1'")));
+  };
+  ASSERT_TRUE(eventually([&] { return archived() > 0; }));
+  const std::int64_t while_recording = archived();
+  ASSERT_TRUE(eventually([&] { return archived() > while_recording; })) << "the second pass sent nothing new";
+  ::kill(run, SIGTERM);
+  ::kill(sim, SIGTERM);
+  int status = 0;
+  ::waitpid(run, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log();
+  ::waitpid(sim, nullptr, 0);
+
+  const auto rest = run_imubridge("sync --to " + archive.url("fleet") + " --db " + db.string() + " --station gs1");
+  ASSERT_EQ(rest.exit_code, 0) << rest.err;
+  EXPECT_NE(rest.err.find("0 sessions added, 1 ended"), std::string::npos) << rest.err;
+  const SessionDigest local = digest_session(db, 1, false);
+  EXPECT_GT(local.samples, while_recording);
+  const auto back = run_imubridge("sync --from " + archive.url("fleet") + " --station gs1 --session 1 --db " +
+                                  (dir / "back.db").string());
+  ASSERT_EQ(back.exit_code, 0) << back.err;
+  expect_same(digest_session(dir / "back.db", 1, false), local);
 }
 
 TEST(CliSync, AnArchiveDownIsOneLineAndAFailure) {

@@ -233,6 +233,32 @@ TEST(ConfigFile, StreamRequestsNameMessagesAndRates) {
             std::string::npos);
 }
 
+// [sync]: the archive's URL without a password (the configuration is recorded with every session), where to read it.
+TEST(ConfigFile, SyncNamesTheArchiveButNeverItsPassword) {
+  const Config c = parse_config(
+      "[sync]\nto = \"postgresql://gs@archive.lab/fleet\"\nstation = \"gs1\"\ninterval_s = 10\nchunks = true\n"
+      "password_file = \"/etc/imubridge/archive.pass\"\n",
+      "test.toml");
+  ASSERT_TRUE(c.sync);
+  EXPECT_EQ(c.sync->to, "postgresql://gs@archive.lab/fleet");
+  EXPECT_EQ(c.sync->station, "gs1");
+  EXPECT_EQ(c.sync->interval, 10s);
+  EXPECT_TRUE(c.sync->chunks);
+  EXPECT_EQ(c.sync->password_file, std::filesystem::path("/etc/imubridge/archive.pass"));
+  EXPECT_EQ(parse_config(to_toml(c), "snapshot").sync, c.sync);
+  EXPECT_EQ(parse_config("[sync]\nto = \"postgresql://a/b\"\n", "test.toml").sync->interval, 30s);
+  EXPECT_EQ(error_of("[sync]\nto = \"postgresql://gs:secret@archive.lab/fleet\"\n"),
+            "test.toml:2: 'sync.to' holds a password, which is never written in the configuration: use password_file "
+            "or password_env");
+  EXPECT_NE(error_of("[sync]\nto = \"postgresql://a/b\"\npassword = \"x\"\n").find("'sync.password' holds a password"),
+            std::string::npos);
+  EXPECT_NE(error_of("[sync]\ninterval_s = 5\n").find("'sync' needs 'to'"), std::string::npos);
+  EXPECT_NE(error_of("[sync]\nto = \"mysql://a/b\"\n").find("'sync.to' must be a postgresql:// URL"),
+            std::string::npos);
+  EXPECT_NE(error_of("[sync]\nto = \"postgresql://a/b\"\nintervall_s = 5\n").find("did you mean 'interval_s'"),
+            std::string::npos);
+}
+
 TEST(ConfigFile, AFileWithoutLinksIsValidUntilNothingAddsAny) {
   Config c = parse_config("[store]\npath = \"x.db\"\n", "test.toml");
   EXPECT_THROW(validate(c, "test.toml"), std::invalid_argument);

@@ -93,21 +93,32 @@ PostgresServer::PostgresServer(PostgresServerOptions options) : bin_(server_bin_
                                    " -U postgres -A trust -E UTF8 --no-sync --no-instructions"),
                     status);
   if (status != 0) throw std::runtime_error("initdb failed: " + initdb);
-  std::string settings = "-c listen_addresses=127.0.0.1 -c unix_socket_directories=" + dir_.string();
-  if (!options.durable) settings += " -c fsync=off -c synchronous_commit=off -c full_page_writes=off";
+  settings_ = "-c listen_addresses=127.0.0.1 -c unix_socket_directories=" + dir_.string();
+  if (!options.durable) settings_ += " -c fsync=off -c synchronous_commit=off -c full_page_writes=off";
   // A port found free can be taken before the server binds it: try a few.
   std::string log;
   for (int attempt = 0; attempt < 5 && !running_; ++attempt) {
     port_ = free_loopback_port();
-    const std::string start = as_server_user(quoted((bin_ / "pg_ctl").string()) + " -D " + quoted(data.string()) +
-                                             " -l " + quoted((dir_ / "server.log").string()) + " -w -t 30 -o " +
-                                             quoted("-p " + std::to_string(port_) + " " + settings) + " start");
-    log = run_capturing(start, status);
-    running_ = status == 0;
+    log = pg_ctl_start();
   }
-  if (!running_) {
-    throw std::runtime_error("PostgreSQL did not start: " + log + slurp_file(dir_ / "server.log"));
-  }
+  if (!running_) throw std::runtime_error("PostgreSQL did not start: " + log + slurp_file(dir_ / "server.log"));
+}
+
+std::string PostgresServer::pg_ctl_start() {
+  int status = 0;
+  const std::string log =
+      run_capturing(as_server_user(quoted((bin_ / "pg_ctl").string()) + " -D " + quoted((dir_ / "data").string()) +
+                                   " -l " + quoted((dir_ / "server.log").string()) + " -w -t 30 -o " +
+                                   quoted("-p " + std::to_string(port_) + " " + settings_) + " start"),
+                    status);
+  running_ = status == 0;
+  return log;
+}
+
+void PostgresServer::start() {
+  if (running_) return;
+  const std::string log = pg_ctl_start();
+  if (!running_) throw std::runtime_error("PostgreSQL did not start again: " + log);
 }
 
 PostgresServer::~PostgresServer() {

@@ -29,13 +29,17 @@ class PostgresServer {
   void create_database(const std::string& name) const;
   // Runs SQL through psql and returns its unaligned, tuples-only output (fields separated by '|').
   std::string psql(const std::string& database, const std::string& sql) const;
-  // Stops the server (fast shutdown); the destructor then only removes the directory.
+  // Stops the server (fast shutdown), and starts it again on the same port and data: an archive going away and
+  // coming back. The destructor stops it if it runs.
   void stop();
+  void start();
 
  private:
   std::string as_server_user(const std::string& command) const;
+  std::string pg_ctl_start();  // pg_ctl's output; sets running_
   std::filesystem::path dir_;
   std::filesystem::path bin_;
+  std::string settings_;
   std::uint16_t port_ = 0;
   bool running_ = false;
 };
