@@ -67,10 +67,34 @@ struct StoreConfig {
   enum class OnFull { rotate, stop } on_full = OnFull::rotate;
 };
 
+// Live telemetry to an MQTT broker (daemon/mqtt_output.hpp; topics, payloads and limits: docs/outputs.md, "MQTT").
+// Secrets are never here: only where to read the password, since the configuration is recorded with each session.
+struct MqttConfig {
+  std::string url;  // as written: mqtt://HOST[:PORT] or mqtts://HOST[:PORT]
+  std::string host;
+  std::uint16_t port = 1883;
+  bool tls = false;  // mqtts://
+  std::string station;
+  int qos = 0;
+  double sample_hz = 50;              // per link, on the device clock; 0: no samples
+  std::optional<double> estimate_hz;  // per link; none: every estimate; 0: no estimates
+  std::chrono::seconds keepalive{30};
+  std::chrono::seconds reconnect_min{1}, reconnect_max{30};
+  std::size_t outbox = 4096;  // messages waiting for the broker; beyond it the oldest is dropped
+  std::optional<std::string> username;
+  std::optional<std::filesystem::path> password_file;  // the password is its first line
+  std::optional<std::string> password_env;             // or the value of this environment variable
+  std::optional<std::filesystem::path> ca_file;        // mqtts://: the CAs to trust; none: the system's
+  std::string client_id;                               // empty: "imubridge-<station>"
+  int protocol_version = 4;                            // 4: MQTT 3.1.1, 5: MQTT 5
+  friend bool operator==(const MqttConfig&, const MqttConfig&) = default;
+};
+
 struct OutputsConfig {
   std::optional<Endpoint> plotjuggler{};  // JSON per sample/estimate over UDP (PlotJuggler's default 127.0.0.1:9870)
   std::vector<Endpoint> line_streams{};   // newline-delimited JSON to any subscriber (tcp-listen or unix)
   std::uint32_t decimation = 1;           // publish every Nth sample (estimates likewise)
+  std::optional<MqttConfig> mqtt{};       // read at start: SIGHUP keeps the running connection
 };
 
 // [sync]: the store copied into the fleet archive in PostgreSQL as it records (daemon/archive_sync.hpp). Like [mqtt],

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -201,11 +202,101 @@ StoreConfig read_store(TomlTable& t) {
   return store;
 }
 
+// mqtt://HOST[:PORT] or mqtts://HOST[:PORT]. Unlike an endpoint's, the host may be a name: libmosquitto resolves it
+// on its own thread, so a slow DNS never holds up recording.
+void parse_mqtt_url(TomlTable& t, const std::string& text, MqttConfig& mqtt) {
+  const auto bad = [&](const std::string& why) {
+    t.fail("url", "'" + text + "': " + why + " (expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT])");
+  };
+  std::string_view rest = text;
+  if (rest.starts_with("mqtt://")) {
+    rest.remove_prefix(7);
+  } else if (rest.starts_with("mqtts://")) {
+    rest.remove_prefix(8);
+    mqtt.tls = true;
+  } else {
+    bad("unknown scheme");
+  }
+  mqtt.port = mqtt.tls ? 8883 : 1883;
+  std::string_view host = rest;
+  std::optional<std::string_view> port;
+  if (rest.starts_with('[')) {  // [IPv6]
+    const auto close = rest.find(']');
+    if (close == std::string_view::npos) bad("no ']' after the IPv6 address");
+    host = rest.substr(1, close - 1);
+    const std::string_view after = rest.substr(close + 1);
+    if (!after.empty() && !after.starts_with(':')) bad("junk after the IPv6 address");
+    if (!after.empty()) port = after.substr(1);
+  } else if (const auto colon = rest.find(':'); colon != std::string_view::npos) {
+    host = rest.substr(0, colon);
+    port = rest.substr(colon + 1);
+    if (port->find(':') != std::string_view::npos) bad("an IPv6 address goes in brackets, as in mqtt://[::1]:1883");
+  }
+  if (host.empty()) bad("no host");
+  if (host.find_first_of("/?#@ ") != std::string_view::npos) bad("a host is a name or an address, nothing more");
+  if (port) {
+    unsigned value = 0;
+    const auto [end, ec] = std::from_chars(port->data(), port->data() + port->size(), value);
+    if (ec != std::errc() || end != port->data() + port->size() || value < 1 || value > 65535) {
+      bad("the port must be a number from 1 to 65535");
+    }
+    mqtt.port = static_cast<std::uint16_t>(value);
+  }
+  mqtt.url = text;
+  mqtt.host = host;
+}
+
+// MQTT topic levels: '/' would add a level and '+', '#' are wildcards, so stations keep to link names' characters.
+bool is_plain_name(std::string_view name) {
+  return !name.empty() && std::all_of(name.begin(), name.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+  });
+}
+
+MqttConfig read_mqtt(TomlTable& t) {
+  MqttConfig mqtt;
+  const auto url = t.string("url");
+  if (!url) t.fail("", "needs a 'url' (mqtt://HOST[:PORT] or mqtts://HOST[:PORT])");
+  parse_mqtt_url(t, *url, mqtt);
+  const auto station = t.string("station");
+  if (!station) t.fail("", "needs a 'station': this ground station's name in the topics, e.g. \"field-1\"");
+  if (!is_plain_name(*station)) t.fail("station", "must be letters, digits, '_', '-' or '.' (it is a topic level)");
+  mqtt.station = *station;
+  if (auto qos = t.integer("qos", 0, 1)) mqtt.qos = static_cast<int>(*qos);
+  if (auto hz = t.number("sample_hz", 0, 100'000)) mqtt.sample_hz = *hz;
+  mqtt.estimate_hz = t.number("estimate_hz", 0, 100'000);
+  if (auto s = t.integer("keepalive_s", 5, 65'535)) mqtt.keepalive = std::chrono::seconds(*s);  // libmosquitto's range
+  if (auto s = t.integer("reconnect_min_s", 1, 3600)) mqtt.reconnect_min = std::chrono::seconds(*s);
+  if (auto s = t.integer("reconnect_max_s", 1, 3600)) mqtt.reconnect_max = std::chrono::seconds(*s);
+  if (mqtt.reconnect_min > mqtt.reconnect_max) t.fail("reconnect_min_s", "is above reconnect_max_s");
+  if (auto n = t.integer("outbox", 16, 10'000'000)) mqtt.outbox = static_cast<std::size_t>(*n);
+  mqtt.username = t.string("username");
+  if (t.find("password")) {
+    t.fail("password", "is never written in the configuration: use password_file or password_env");
+  }
+  if (auto file = t.string("password_file")) mqtt.password_file = *file;
+  mqtt.password_env = t.string("password_env");
+  if (mqtt.password_file && mqtt.password_env) t.fail("password_env", "and password_file: give one of them");
+  if ((mqtt.password_file || mqtt.password_env) && !mqtt.username) {
+    t.fail(mqtt.password_file ? "password_file" : "password_env", "needs a 'username'");
+  }
+  if (auto ca = t.string("ca_file")) {
+    if (!mqtt.tls) t.fail("ca_file", "is for mqtts:// URLs");
+    mqtt.ca_file = *ca;
+  }
+  mqtt.client_id = t.string("client_id").value_or("imubridge-" + mqtt.station);
+  if (mqtt.client_id.empty()) t.fail("client_id", "must not be empty");
+  if (auto version = t.choice<int>("protocol_version", {{"3.1.1", 4}, {"5", 5}})) mqtt.protocol_version = *version;
+  t.finish();
+  return mqtt;
+}
+
 OutputsConfig read_outputs(TomlTable& t) {
   OutputsConfig outputs;
   outputs.plotjuggler = read_endpoint(t, "plotjuggler");
   outputs.line_streams = read_endpoints(t, "line_streams");
   if (auto n = t.integer("decimation", 1, 1'000'000)) outputs.decimation = static_cast<std::uint32_t>(*n);
+  if (auto mqtt = t.table("mqtt")) outputs.mqtt = read_mqtt(*mqtt);
   t.finish();
   return outputs;
 }
@@ -355,6 +446,24 @@ std::string to_toml(const Config& config) {
   toml::table outputs{{"line_streams", endpoint_texts(config.outputs.line_streams)},
                       {"decimation", static_cast<std::int64_t>(config.outputs.decimation)}};
   if (config.outputs.plotjuggler) outputs.insert("plotjuggler", config.outputs.plotjuggler->text);
+  if (const auto& m = config.outputs.mqtt) {
+    toml::table mqtt{{"url", m->url},
+                     {"station", m->station},
+                     {"qos", static_cast<std::int64_t>(m->qos)},
+                     {"sample_hz", m->sample_hz},
+                     {"keepalive_s", static_cast<std::int64_t>(m->keepalive.count())},
+                     {"reconnect_min_s", static_cast<std::int64_t>(m->reconnect_min.count())},
+                     {"reconnect_max_s", static_cast<std::int64_t>(m->reconnect_max.count())},
+                     {"outbox", static_cast<std::int64_t>(m->outbox)},
+                     {"client_id", m->client_id},
+                     {"protocol_version", m->protocol_version == 5 ? "5" : "3.1.1"}};
+    if (m->estimate_hz) mqtt.insert("estimate_hz", *m->estimate_hz);
+    if (m->username) mqtt.insert("username", *m->username);
+    if (m->password_file) mqtt.insert("password_file", m->password_file->string());
+    if (m->password_env) mqtt.insert("password_env", *m->password_env);
+    if (m->ca_file) mqtt.insert("ca_file", m->ca_file->string());
+    outputs.insert("mqtt", std::move(mqtt));
+  }
   root.insert("outputs", std::move(outputs));
   if (const auto& y = config.sync) {
     toml::table sync{
@@ -364,7 +473,6 @@ std::string to_toml(const Config& config) {
     if (y->password_env) sync.insert("password_env", *y->password_env);
     root.insert("sync", std::move(sync));
   }
-
 
   toml::array links;
   for (const LinkConfig& l : config.links) {

@@ -202,11 +202,27 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
   std::vector<LiveLink> live;
   for (auto& link : links_) {
     live.push_back({.name = link->config.name,
+                    .format = link->config.format,
                     .feedback = link->feedback ? &*link->feedback : nullptr,
                     .bridge = link->bridge.get(),
                     .write = [this, &l = *link](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); }});
   }
-  for (auto& sink : make_live_sinks(*outputs_, live)) sinks_.push_back(std::move(sink));
+  const LiveContext context{
+      .io = io_,
+      .outputs = *outputs_,
+      .config = config_.outputs,
+      .record_event = [this](std::optional<std::size_t> link, std::string kind, std::string detail,
+                             std::int64_t count) {
+        record([&](Recording& r) {
+          r.store.append_event(r.session, {.link_id = link ? std::optional(links_.at(*link)->store_link) : std::nullopt,
+                                           .mono_ns = mono_now_ns(),
+                                           .wall_ns = wall_now_ns(),
+                                           .kind = std::move(kind),
+                                           .count = count,
+                                           .detail = std::move(detail)});
+        });
+      }};
+  for (auto& sink : make_live_sinks(context, live)) sinks_.push_back(std::move(sink));
   for (auto& sink : sinks_) engine_->add_sink(*sink);
   if (auto problem = storage_problem()) {
     spdlog::error("not recording: {}", *problem);

@@ -2,6 +2,8 @@
 
 #include <utility>
 
+#include "daemon/mqtt_output.hpp"
+
 namespace imubridge::daemon {
 
 OutputsSink::OutputsSink(Outputs& outputs, std::vector<std::string> link_names)
@@ -29,7 +31,7 @@ void BridgeSink::on_bytes(std::size_t link, std::span<const std::uint8_t> bytes,
   if (link == link_) bridge_.from_link(bytes);
 }
 
-std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(Outputs& outputs,
+std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(const LiveContext& context,
                                                                     const std::vector<LiveLink>& links) {
   std::vector<std::unique_ptr<pipeline::SessionSink>> sinks;
   std::vector<std::string> names;
@@ -39,7 +41,8 @@ std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(Outputs& out
     if (link.bridge) sinks.push_back(std::make_unique<BridgeSink>(i, *link.bridge));
     if (link.feedback) sinks.push_back(std::make_unique<FeedbackSink>(i, *link.feedback, link.write));
   }
-  sinks.push_back(std::make_unique<OutputsSink>(outputs, std::move(names)));
+  if (context.config.mqtt) sinks.push_back(std::make_unique<MqttSink>(*context.config.mqtt, links, context));
+  sinks.push_back(std::make_unique<OutputsSink>(context.outputs, std::move(names)));
   return sinks;
 }
 

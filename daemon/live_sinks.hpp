@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/asio.hpp"
 #include "daemon/bridge.hpp"
 #include "daemon/outputs.hpp"
 #include "daemon/vehicle_feedback.hpp"
@@ -59,14 +60,27 @@ class BridgeSink final : public pipeline::SessionSink {
 // What make_live_sinks needs of one configured link; the pointers may be null (no feedback, no bridge).
 struct LiveLink {
   std::string name;
+  protocol::WireFormat format = protocol::WireFormat::imubridge;
   VehicleFeedback* feedback = nullptr;
   LinkBridge* bridge = nullptr;
   FeedbackSink::Write write;  // bytes to the vehicle on this link
 };
 
+// What a live sink may use of the running daemon, besides the engine's calls. Everything here belongs to the
+// daemon's thread (the io_context's); a sink with threads of its own posts to `io` to use it.
+struct LiveContext {
+  boost::asio::io_context& io;
+  Outputs& outputs;  // PlotJuggler and line streams; another output's counters join theirs (Outputs::add_counters)
+  const OutputsConfig& config;
+  // Records an event in the session while recording, nothing otherwise: `link` is the engine's link index, or none
+  // for the whole session.
+  std::function<void(std::optional<std::size_t> link, std::string kind, std::string detail, std::int64_t count)>
+      record_event;
+};
+
 // The sinks of a running daemon, in the order the engine calls them: the links' bridges and feedback, then the
 // outputs.
-std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(Outputs& outputs,
+std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(const LiveContext& context,
                                                                     const std::vector<LiveLink>& links);
 
 }  // namespace imubridge::daemon

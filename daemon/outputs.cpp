@@ -103,6 +103,17 @@ void append_measurement(std::string& out, const protocol::Sample& s, const store
 
 }  // namespace
 
+void append_line_members(std::string& out, std::string_view link, const protocol::Sample& sample,
+                         const store::Estimate* estimate_or_null) {
+  // device_time_us / 1e6 rather than * 1e-6: the quotient is correctly rounded, so 1500000 us is exactly 1.5 s.
+  out += "\"timestamp\":";
+  append_number(out, static_cast<double>(sample.device_time_us) / 1e6);
+  append_key(out, "link");
+  append_string(out, link);
+  out += ',';
+  append_measurement(out, sample, estimate_or_null);
+}
+
 Outputs::Outputs(boost::asio::io_context& io, const OutputsConfig& config) : io_(io) { reconfigure(config); }
 
 Outputs::~Outputs() {
@@ -154,15 +165,9 @@ void Outputs::publish(std::string_view link, const protocol::Sample& sample, con
   ++samples_published_;
 
   if (!plotjuggler_ && line_streams_.empty()) return;
-  // device_time_us / 1e6 rather than * 1e-6: the quotient is correctly rounded, so 1500000 us is exactly 1.5 s.
-  const double timestamp = static_cast<double>(sample.device_time_us) / 1e6;
   if (!line_streams_.empty()) {
-    std::string line = "{\"timestamp\":";
-    append_number(line, timestamp);
-    append_key(line, "link");
-    append_string(line, link);
-    line += ',';
-    append_measurement(line, sample, estimate_or_null);
+    std::string line = "{";
+    append_line_members(line, link, sample, estimate_or_null);
     line += "}\n";
     const auto message = std::make_shared<const std::string>(std::move(line));
     for (const auto& stream : line_streams_) stream->send(message);
@@ -171,7 +176,7 @@ void Outputs::publish(std::string_view link, const protocol::Sample& sample, con
     // PlotJuggler names a series by its path and cannot split one by a string field, so the link is a path level.
     std::string& datagram = plotjuggler_->datagram;  // reused: its capacity stays, so no allocation per sample
     datagram = "{\"timestamp\":";
-    append_number(datagram, timestamp);
+    append_number(datagram, static_cast<double>(sample.device_time_us) / 1e6);  // as append_line_members does
     datagram += ',';
     append_string(datagram, link);
     datagram += ":{";
@@ -208,7 +213,16 @@ nlohmann::json Outputs::counters() const {
     if (stream->endpoint().kind == Endpoint::Kind::tcp_listen) s["port"] = stream->port();
     j["line_streams"].push_back(std::move(s));
   }
+  for (const auto& [name, counters] : other_counters_) j[name] = counters();
   return j;
+}
+
+void Outputs::add_counters(std::string name, std::function<nlohmann::json()> counters) {
+  other_counters_.insert_or_assign(std::move(name), std::move(counters));
+}
+
+void Outputs::remove_counters(std::string_view name) {
+  if (const auto it = other_counters_.find(name); it != other_counters_.end()) other_counters_.erase(it);
 }
 
 }  // namespace imubridge::daemon
