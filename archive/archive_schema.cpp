@@ -31,6 +31,7 @@ CREATE TABLE sessions (
   writer_boot_id text,
   writer_start_ticks bigint,
   interrupted integer NOT NULL DEFAULT 0,
+  synced_through text,
   PRIMARY KEY (station, id)
 );
 CREATE TABLE links (
@@ -136,6 +137,8 @@ void refuse_newer(const PgConnection& pg, std::int64_t version) {
 }  // namespace
 
 void ensure_archive_schema(PgConnection& pg) {
+  // Every pass starts here: an archive that is up to date costs one read, and no privilege to create anything.
+  if (archive_version(pg) == kArchiveSchemaVersion) return;
   pg.transaction([&] {
     pg.exec(kSchemaLock);  // held to COMMIT: another station's sync waits here, then finds the schema made
     pg.exec("CREATE TABLE IF NOT EXISTS imubridge_archive (version integer NOT NULL)");

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <climits>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -167,15 +168,59 @@ std::vector<std::int64_t> local_runs(const store::Database& db, std::int64_t ses
   return runs;
 }
 
+// A session's row as the archive has it.
+struct ArchivedSession {
+  std::string kind;
+  std::int64_t started_wall_ns = 0;
+  std::optional<std::string> synced_through;
+};
+
+// Where the store's session stood when a pass began: its ending and each table's largest id (chunks: "-" when not
+// copied). A pass that copied the session through writes it to the archive's row; a later pass that finds the same
+// skips the session without a query, so a rerun over a store of hundreds of ended sessions costs one query, not
+// seven per session (a replay adding a run to an old session changes it, and the run is copied).
+std::string local_position(const store::Database& db, const LocalSession& s, const std::vector<std::int64_t>& runs,
+                           bool chunks) {
+  const auto largest_id = [&](std::string_view table, std::string_view parent, std::int64_t of) {
+    store::Statement query(
+        db, "SELECT coalesce(max(id), 0) FROM " + std::string(table) + " WHERE " + std::string(parent) + " = ?1");
+    query.bind_int(1, of);
+    const std::int64_t id = query.step() ? query.column_int(0) : 0;
+    while (query.step()) {
+    }
+    return std::to_string(id);
+  };
+  std::string position = "ended=" + (s.ended_wall_ns ? std::to_string(*s.ended_wall_ns) : std::string("-")) +
+                         " interrupted=" + std::to_string(s.interrupted);
+  for (std::string_view table : {"links", "runs", "events", "reference", "samples"}) {
+    position += " " + std::string(table) + "=" + largest_id(table, "session_id", s.id);
+  }
+  for (std::int64_t run : runs)
+    position += " estimates." + std::to_string(run) + "=" + largest_id("estimates", "run_id", run);
+  position += " chunks=" + (chunks ? largest_id("chunks", "session_id", s.id) : std::string("-"));
+  return position;
+}
+
 class SessionSync {
  public:
   SessionSync(const store::Database& db, PgConnection& pg, const SyncOptions& options, SyncCounts& counts,
               const std::function<void(const SyncProgress&)>& progress)
-      : db_(db), pg_(pg), options_(options), counts_(counts), progress_(progress) {}
+      : db_(db), pg_(pg), options_(options), counts_(counts), progress_(progress) {
+    const PgResult rows = pg_.query("SELECT id, kind, started_wall_ns, synced_through FROM sessions WHERE station = $1",
+                                    {options_.station});
+    for (int i = 0; i < rows.rows(); ++i) {
+      archived_[rows.integer(i, 0)] = {
+          .kind = rows.text(i, 1),
+          .started_wall_ns = rows.integer(i, 2),
+          .synced_through = rows.is_null(i, 3) ? std::nullopt : std::optional(rows.text(i, 3))};
+    }
+  }
 
   // False when asked to stop before the session was through.
   bool sync(const LocalSession& s) {
-    add_session(s);
+    const std::vector<std::int64_t> runs = local_runs(db_, s.id);
+    const std::string position = local_position(db_, s, runs, options_.chunks);
+    if (!add_session(s, position)) return true;  // nothing new since the last pass through it
     // Parents before the rows that name them; the ending last, once every row it covers is in.
     for (const auto& [table, count] :
          std::array<std::pair<const TableCopy*, std::int64_t*>, 5>{{{&kLinks, &counts_.links},
@@ -185,29 +230,31 @@ class SessionSync {
                                                                     {&kSamples, &counts_.samples}}}) {
       if (!copy(*table, s.id, std::nullopt, *count)) return false;
     }
-    for (std::int64_t run : local_runs(db_, s.id)) {
+    for (std::int64_t run : runs) {
       if (!copy(kEstimates, s.id, run, counts_.estimates)) return false;
     }
     if (options_.chunks && !copy(kChunks, s.id, std::nullopt, counts_.chunks)) return false;
     end_session(s);
+    pg_.query("UPDATE sessions SET synced_through = $3 WHERE station = $1 AND id = $2",
+              {options_.station, std::to_string(s.id), position});
     return true;
   }
 
  private:
   // The session's row: created on its first sync (open, whatever it is by now); one of the same (station, id) that
-  // is not this session means two stores share a station name, and mixing their rows would corrupt both.
-  void add_session(const LocalSession& s) {
-    const PgResult archived = pg_.query("SELECT kind, started_wall_ns FROM sessions WHERE station = $1 AND id = $2",
-                                        {options_.station, std::to_string(s.id)});
-    if (archived.rows() > 0) {
-      if (archived.text(0, 0) != s.kind || archived.integer(0, 1) != s.started_wall_ns) {
+  // is not this session means two stores share a station name, and mixing their rows would corrupt both. False
+  // when the archive has the session through `position` already.
+  bool add_session(const LocalSession& s, const std::string& position) {
+    if (const auto found = archived_.find(s.id); found != archived_.end()) {
+      const ArchivedSession& a = found->second;
+      if (a.kind != s.kind || a.started_wall_ns != s.started_wall_ns) {
         throw ArchiveError(pg_.name() + ": station '" + options_.station + "' session " + std::to_string(s.id) +
-                           " in the archive is another session (" + archived.text(0, 0) + ", started_wall_ns " +
-                           archived.text(0, 1) + ") than this store's (" + s.kind + ", started_wall_ns " +
+                           " in the archive is another session (" + a.kind + ", started_wall_ns " +
+                           std::to_string(a.started_wall_ns) + ") than this store's (" + s.kind + ", started_wall_ns " +
                            std::to_string(s.started_wall_ns) +
                            "): each store file needs its own station name (--station)");
       }
-      return;
+      return a.synced_through != position;
     }
     pg_.query(
         "INSERT INTO sessions (station, id, kind, source, started_wall_ns, config, software_version, writer_pid, "
@@ -215,6 +262,7 @@ class SessionSync {
         {options_.station, std::to_string(s.id), s.kind, s.source, std::to_string(s.started_wall_ns), s.config,
          s.software_version, as_param(s.writer_pid), s.writer_boot_id, as_param(s.writer_start_ticks)});
     ++counts_.sessions_added;
+    return true;
   }
 
   // The ending read before any row was copied: every row of an ended session was committed before it ended.
@@ -301,6 +349,7 @@ class SessionSync {
   const SyncOptions& options_;
   SyncCounts& counts_;
   const std::function<void(const SyncProgress&)>& progress_;
+  std::map<std::int64_t, ArchivedSession> archived_;  // the station's sessions in the archive, as the pass began
 };
 
 }  // namespace

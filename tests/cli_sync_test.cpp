@@ -293,7 +293,7 @@ TEST(CliSync, TwoStationsKeepTheirSessionsApart) {
   expect_archive_counts(database, "a", dir / "a.db", /*with_chunks=*/false);
 }
 
-TEST(CliSync, ARerunSendsNothing) {
+TEST(CliSync, ARerunSendsOnlyWhatIsNew) {
   TempDir dir;
   record_session(dir / "gs.db", 7, 2, 200);
   const std::string database = fresh_database();
@@ -309,6 +309,22 @@ TEST(CliSync, ARerunSendsNothing) {
   // The server's own count of rows written: the statistics of a rerun's transactions would show any row it sent.
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // the statistics reach the view within a second
   EXPECT_EQ(archive_int(database, statistics), writes_before);
+
+  // What is new in a session synced through is still found: a replay's run, and the chunks once asked for.
+  ASSERT_EQ(run_imubridge("replay --db " + (dir / "gs.db").string() + " --session 1").exit_code, 0);
+  const auto replayed = run_imubridge(sync);
+  EXPECT_NE(replayed.err.find(" 0 samples, " + std::to_string(local_count(dir / "gs.db", "SELECT count(*) FROM "
+                                                                                         "estimates WHERE run_id = 2")) +
+                              " estimates,"),
+            std::string::npos)
+      << replayed.err;
+  const auto with_chunks = run_imubridge(sync + " --chunks");
+  EXPECT_NE(with_chunks.err.find(" " + std::to_string(local_count(dir / "gs.db", "SELECT count(*) FROM chunks")) +
+                                 " chunks,"),
+            std::string::npos)
+      << with_chunks.err;
+  expect_archive_counts(database, "gs1", dir / "gs.db", /*with_chunks=*/true);
+  EXPECT_NE(run_imubridge(sync + " --chunks").err.find("nothing new"), std::string::npos);
 }
 
 TEST(CliSync, ASessionStillRecordingIsSyncedAsFarAsItGoesThenFinished) {
