@@ -27,22 +27,26 @@ std::array<std::int32_t, 10> decode_raw(const std::vector<std::uint8_t>& bytes) 
 
 class SessionRestore {
  public:
-  SessionRestore(PgConnection& pg, const std::string& station, std::int64_t session, store::Store& local)
-      : pg_(pg), local_(local), station_(station), session_(session) {}
+  SessionRestore(PgConnection& pg, const std::string& station, std::int64_t session,
+                 const std::filesystem::path& local_path)
+      : pg_(pg), local_path_(local_path), station_(station), session_(session) {}
 
   RestoredSession run() {
     const PgResult s = pg_.query(
         "SELECT kind, source, config, started_wall_ns, software_version, ended_wall_ns FROM sessions "
         "WHERE station = $1 AND id = $2",
         {station_, std::to_string(session_)});
-    if (s.rows() == 0)
+    if (s.rows() == 0) {
       throw ArchiveError(pg_.name() + " has no session " + std::to_string(session_) + " of station '" + station_ + "'" +
                          stations_hint());
-    result_.local_session = local_.begin_session({.kind = s.text(0, 0),
-                                                  .source = s.text(0, 1),
-                                                  .config = s.text(0, 2),
-                                                  .started_wall_ns = s.integer(0, 3),
-                                                  .software_version = s.text(0, 4)});
+    }
+    // Opened (or created) only now: a session that is not there leaves no empty store behind.
+    local_store_.emplace(local_path_);
+    result_.local_session = local_store_->begin_session({.kind = s.text(0, 0),
+                                                         .source = s.text(0, 1),
+                                                         .config = s.text(0, 2),
+                                                         .started_wall_ns = s.integer(0, 3),
+                                                         .software_version = s.text(0, 4)});
     try {
       copy_rows(s.is_null(0, 5) ? std::nullopt : std::optional(s.integer(0, 5)));
     } catch (const std::exception& e) {
@@ -81,20 +85,20 @@ class SessionRestore {
   void copy_rows(std::optional<std::int64_t> ended_wall_ns) {
     const std::int64_t local = result_.local_session;
     each_row("id, name, protocol, device", "links", "", [&](const CopyLine& row) {
-      links_[row.integer(0)] = local_.add_link(local, row.text(1), row.text(2), row.text(3));
+      links_[row.integer(0)] = local_store_->add_link(local, row.text(1), row.text(2), row.text(3));
     });
     std::map<std::int64_t, std::int64_t> runs;
     each_row("id, kind, params, created_wall_ns, software_version", "runs", "", [&](const CopyLine& row) {
-      runs[row.integer(0)] = local_.begin_run(local, {.kind = row.text(1),
-                                                      .params_json = row.text(2),
-                                                      .created_wall_ns = row.integer(3),
-                                                      .software_version = row.text(4)});
+      runs[row.integer(0)] = local_store_->begin_run(local, {.kind = row.text(1),
+                                                             .params_json = row.text(2),
+                                                             .created_wall_ns = row.integer(3),
+                                                             .software_version = row.text(4)});
     });
     each_row("link_id, direction, recv_mono_ns, recv_wall_ns, bytes", "chunks", "", [&](const CopyLine& row) {
       const auto bytes = row.bytes(4);
-      local_.append_chunk(local, local_link(row.integer(0)),
-                          row.text(1) == "tx" ? store::Direction::tx : store::Direction::rx, row.integer(2),
-                          row.integer(3), bytes);
+      local_store_->append_chunk(local, local_link(row.integer(0)),
+                                 row.text(1) == "tx" ? store::Direction::tx : store::Direction::rx, row.integer(2),
+                                 row.integer(3), bytes);
       ++result_.chunks;
     });
     each_row("link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, gz, mx, my, mz, temperature_c, raw",
@@ -113,31 +117,31 @@ class SessionRestore {
                if (sample.has_temperature) sample.temperature_c = row.real(13);
                sample.has_raw = !row.is_null(14);
                if (sample.has_raw) sample.raw = decode_raw(row.bytes(14));
-               local_.append_sample(local, sample);
+               local_store_->append_sample(local, sample);
                ++result_.samples;
              });
     each_row("link_id, mono_ns, wall_ns, kind, count, detail", "events", "", [&](const CopyLine& row) {
       const auto link = row.optional_integer(0);
-      local_.append_event(local, {.link_id = link ? std::optional(local_link(*link)) : std::nullopt,
-                                  .mono_ns = row.integer(1),
-                                  .wall_ns = row.integer(2),
-                                  .kind = row.text(3),
-                                  .count = row.integer(4),
-                                  .detail = row.text(5)});
+      local_store_->append_event(local, {.link_id = link ? std::optional(local_link(*link)) : std::nullopt,
+                                         .mono_ns = row.integer(1),
+                                         .wall_ns = row.integer(2),
+                                         .kind = row.text(3),
+                                         .count = row.integer(4),
+                                         .detail = row.text(5)});
       ++result_.events;
     });
     for (const auto& [archived_run, local_run] : runs) {
       each_row("link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy", "estimates",
                " AND run_id = " + std::to_string(archived_run), [&](const CopyLine& row) {
-                 local_.append_estimate(local_run, {.link_id = local_link(row.integer(0)),
-                                                    .seq = static_cast<std::uint64_t>(row.integer(1)),
-                                                    .t_s = row.real(2),
-                                                    .fx = row.real(3),
-                                                    .fy = row.real(4),
-                                                    .vx = row.real(5),
-                                                    .vy = row.real(6),
-                                                    .var_vx = row.real(7),
-                                                    .var_vy = row.real(8)});
+                 local_store_->append_estimate(local_run, {.link_id = local_link(row.integer(0)),
+                                                           .seq = static_cast<std::uint64_t>(row.integer(1)),
+                                                           .t_s = row.real(2),
+                                                           .fx = row.real(3),
+                                                           .fy = row.real(4),
+                                                           .vx = row.real(5),
+                                                           .vy = row.real(6),
+                                                           .var_vx = row.real(7),
+                                                           .var_vy = row.real(8)});
                  ++result_.estimates;
                });
     }
@@ -148,15 +152,16 @@ class SessionRestore {
       if (!(row.is_null(8) && row.is_null(9) && row.is_null(10))) {
         reference.velocity = std::array{row.real(8), row.real(9), row.real(10)};
       }
-      local_.append_reference(local, reference);
+      local_store_->append_reference(local, reference);
       ++result_.reference;
     });
-    local_.commit();
-    if (ended_wall_ns) local_.end_session(local, *ended_wall_ns);
+    local_store_->commit();
+    if (ended_wall_ns) local_store_->end_session(local, *ended_wall_ns);
   }
 
   PgConnection& pg_;
-  store::Store& local_;
+  std::filesystem::path local_path_;
+  std::optional<store::Store> local_store_;
   std::string station_;
   std::int64_t session_;
   std::map<std::int64_t, std::int64_t> links_;  // archived link id -> local link id
@@ -166,7 +171,7 @@ class SessionRestore {
 }  // namespace
 
 RestoredSession restore_session(PgConnection& pg, const std::string& station, std::int64_t session,
-                                store::Store& local) {
+                                const std::filesystem::path& local_path) {
   require_archive_schema(pg);
   // Doubles in their shortest exact form and bytea as hex, whatever the server's defaults: the rows come back bit
   // for bit.
@@ -175,7 +180,7 @@ RestoredSession restore_session(PgConnection& pg, const std::string& station, st
   RestoredSession restored;
   pg.exec("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
   try {
-    restored = SessionRestore(pg, station, session, local).run();
+    restored = SessionRestore(pg, station, session, local_path).run();
     pg.exec("COMMIT");
   } catch (...) {
     pg.rollback();

@@ -3,6 +3,7 @@
 // diagnose, replay, export) then reads it through the one store API it already uses, rather than each learning
 // PostgreSQL. docs/storage.md, "The archive".
 #include <cstdint>
+#include <filesystem>
 #include <string>
 
 #include "archive/pg_connection.hpp"
@@ -15,11 +16,12 @@ struct RestoredSession {
   std::int64_t samples = 0, estimates = 0, events = 0, reference = 0, chunks = 0;
 };
 
-// Copies session `session` of `station` from the archive into `local`: the session, its links and runs (renumbered
-// as the file numbers them), and every row in its original order. The session is ended as the archive has it (one
-// still open in the archive stays open). Throws ArchiveError if the archive has no such session; a failure half-way
-// leaves the local session incomplete, and says so.
+// Copies session `session` of `station` from the archive into the store at `local_path` (created if missing, and only
+// once the session is found): the session, its links and runs (renumbered as the file numbers them), and every row
+// in its original order. The session is ended as the archive has it (one still open in the archive stays open).
+// Throws ArchiveError if the archive has no such session; a failure half-way leaves the local session incomplete,
+// and says so.
 RestoredSession restore_session(PgConnection& pg, const std::string& station, std::int64_t session,
-                                store::Store& local);
+                                const std::filesystem::path& local_path);
 
 }  // namespace imubridge::archive

@@ -366,10 +366,11 @@ SyncCounts sync_to_archive(const std::filesystem::path& store_path, PgConnection
   if (options.batch_rows == 0) throw std::invalid_argument("batch_rows must be at least 1");
   store::Database db(store_path, /*read_only=*/true);
   const std::int64_t schema_version = store::open_schema(db, /*read_only=*/true);
+  const std::vector<LocalSession> sessions = local_sessions(db, schema_version, options.session);
   ensure_archive_schema(pg);
   SyncCounts counts;
   SessionSync session_sync(db, pg, options, counts, progress);
-  for (const LocalSession& s : local_sessions(db, schema_version, options.session)) {
+  for (const LocalSession& s : sessions) {
     if (!session_sync.sync(s)) break;
   }
   return counts;

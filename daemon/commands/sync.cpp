@@ -64,8 +64,7 @@ int run_sync_from(const SyncCommandOptions& o) {
   if (!o.session) throw std::invalid_argument("--from needs --session: the station's session id in the archive");
   if (o.chunks) throw std::invalid_argument("--chunks is for --to: --from brings whatever the archive has");
   archive::PgConnection pg(connect_options(o.from, o));
-  store::Store local(o.db);
-  const auto r = archive::restore_session(pg, o.station, *o.session, local);
+  const auto r = archive::restore_session(pg, o.station, *o.session, o.db);
   std::fprintf(stderr,
                "station '%s' session %lld from %s into %s as session %lld: %lld samples, %lld estimates, %lld "
                "events, %lld reference rows, %lld chunks\n",
