@@ -1,6 +1,8 @@
 #include "daemon/archive_sync.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -66,6 +68,8 @@ archive::PgConnectOptions ArchiveSyncThread::connect_options() const {
 }
 
 void ArchiveSyncThread::run(std::stop_token stop) {
+  // Background work: on a busy core the recorder's thread goes first (Linux's nice is per thread).
+  ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 10);
   const std::string station = config_.station.empty() ? archive::default_station() : config_.station;
   const std::string archive_name = archive::redact_url(config_.to);
   std::unique_ptr<archive::PgConnection> pg;
