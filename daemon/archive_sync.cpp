@@ -34,7 +34,7 @@ std::vector<fs::path> station_store_files(const fs::path& store_path) {
       rotated.push_back(entry.path());
     }
   }
-  std::sort(rotated.begin(), rotated.end());  // the names carry their UTC time
+  std::sort(rotated.begin(), rotated.end());  // any order would do: each file is a station of its own
   files.insert(files.end(), rotated.begin(), rotated.end());
   return files;
 }

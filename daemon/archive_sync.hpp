@@ -16,7 +16,7 @@
 namespace imubridge::daemon {
 
 // The store files of a station: the configured one, and the ones a rotation continued in beside it
-// (imubridge-20240521-143000.db), oldest first. Only those that exist.
+// (imubridge-20240521-143000.db), in name order (their time, to the second). Only those that exist.
 std::vector<std::filesystem::path> station_store_files(const std::filesystem::path& store_path);
 // A file's name in the archive: the station for the configured file, "station/imubridge-20240521-143000" for a
 // rotated one, whose session ids start at 1 again.
