@@ -27,6 +27,8 @@ constexpr std::size_t kInFlightWindow = 64;
 constexpr auto kReportInterval = 5s;
 // At shutdown, how long what waits in the outbox may take to reach a connected broker.
 constexpr auto kFlushLimit = 1s;
+// The connection thread's longest wait for the socket; also how long stopping may wait for it.
+constexpr auto kLoopTimeout = 500ms;
 
 std::int64_t wall_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
@@ -136,9 +138,6 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
         check(mosquitto_int_option(client_, MOSQ_OPT_TLS_USE_OS_CERTS, 1), "outputs.mqtt: the system's CAs");
       }
     }
-    check(mosquitto_reconnect_delay_set(client_, static_cast<unsigned>(config_.reconnect_min.count()),
-                                        static_cast<unsigned>(config_.reconnect_max.count()), true),
-          "outputs.mqtt.reconnect_min_s");
   } catch (...) {
     mosquitto_destroy(client_);
     throw;
@@ -150,7 +149,13 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
   mosquitto_publish_callback_set(
       client_, [](mosquitto*, void* self, int mid) { static_cast<MqttSink*>(self)->on_publish(mid); });
 
-  // A broker that is down now is no error: libmosquitto's thread keeps trying, with backoff.
+  mosquitto_log_callback_set(client_, [](mosquitto*, void* self, int level, const char* text) {
+    if (level == MOSQ_LOG_ERR) static_cast<MqttSink*>(self)->on_error(text);
+  });
+  // Another thread runs the connection (network_loop): mosquitto_publish only queues, and wakes it.
+  mosquitto_threaded_set(client_, true);
+
+  // A broker that is down now is no error: network_loop keeps trying, with backoff.
   const int rc =
       mosquitto_connect_async(client_, config_.host.c_str(), config_.port, static_cast<int>(config_.keepalive.count()));
   if (rc == MOSQ_ERR_INVAL) {
@@ -161,10 +166,7 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
     spdlog::warn("mqtt: cannot reach {} yet ({}); trying again in the background", config_.url,
                  rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc));
   }
-  if (const int started = mosquitto_loop_start(client_); started != MOSQ_ERR_SUCCESS) {
-    mosquitto_destroy(client_);
-    throw std::runtime_error(std::string("mqtt: cannot start libmosquitto's thread: ") + mosquitto_strerror(started));
-  }
+  network_ = std::thread([this] { network_loop(); });
   publisher_ = std::thread([this] { publish_loop(); });
   outputs_.add_counters("mqtt", [this] { return counters(); });
   schedule_report();
@@ -192,21 +194,74 @@ MqttSink::~MqttSink() {
   }
   changed_.notify_all();
   publisher_.join();
+  {
+    std::lock_guard lock(mutex_);
+    closing_ = true;  // no reconnecting from now on
+  }
   if (connected) {
     // A station that stops cleanly says so itself: the broker keeps the last will for stations that die.
     mosquitto_publish(client_, nullptr, status_topic_.c_str(), static_cast<int>(offline_payload_.size()),
                       offline_payload_.data(), 1, true);
   }
   mosquitto_disconnect(client_);
-  bool disconnected = false;
   {
+    // The DISCONNECT goes out and the connection closes; a broker that stopped reading gets kFlushLimit.
     std::unique_lock lock(mutex_);
-    disconnected = changed_.wait_for(lock, kFlushLimit, [&] { return !connected_; });
+    changed_.wait_for(lock, kFlushLimit, [&] { return !connected_; });
+    abandon_ = true;
   }
-  // libmosquitto's thread ends by itself once the DISCONNECT is out. Otherwise it may be in a blocking connect to a
-  // host that does not answer, or writing to a broker that stopped reading: cancel it.
-  mosquitto_loop_stop(client_, /*force=*/!(connected && disconnected));
+  changed_.notify_all();
+  network_.join();  // at most a select's timeout (kLoopTimeout) away
   mosquitto_destroy(client_);
+}
+
+// The sink's connection thread: libmosquitto's loop, and reconnection after any failure. Not mosquitto_loop_start:
+// its loop gives up for good after a TLS error or an MQTT 5 refusal, and its wait between attempts cannot be cut
+// short at shutdown.
+void MqttSink::network_loop() {
+  std::unique_lock lock(mutex_);
+  int failures = 0;
+  std::string last_failure;
+  while (!abandon_) {
+    lock.unlock();
+    int rc = mosquitto_loop(client_, static_cast<int>(kLoopTimeout.count()), 1);
+    lock.lock();
+    if (rc == MOSQ_ERR_SUCCESS) {
+      if (connected_) failures = 0;
+      continue;
+    }
+    if (closing_) break;
+    // Lost, refused, or never made: wait, then try again, min, 2 min, 4 min, ... up to max.
+    const auto delay = std::min<std::chrono::milliseconds>(config_.reconnect_max,
+                                                           config_.reconnect_min * (1 << std::min(failures, 16)));
+    ++failures;
+    changed_.wait_for(lock, delay, [&] { return closing_ || abandon_; });
+    if (closing_ || abandon_) break;
+    lock.unlock();
+    rc = mosquitto_reconnect_async(client_);
+    lock.lock();
+    if (rc != MOSQ_ERR_SUCCESS) {
+      const std::string failure = rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc);
+      if (failure != last_failure) {  // said once, not at every attempt
+        last_failure = failure;
+        boost::asio::post(io_, [this, failure] {
+          spdlog::warn("mqtt: cannot connect to {}: {}; trying again, every {} s at most", config_.url, failure,
+                       config_.reconnect_max.count());
+        });
+      }
+    } else {
+      last_failure.clear();
+    }
+  }
+}
+
+void MqttSink::on_error(const char* text) {
+  std::string message(text);
+  boost::asio::post(io_, [this, message = std::move(message)] {
+    if (message == last_error_logged_) return;  // a broker refusing every attempt alike is said once
+    last_error_logged_ = message;
+    spdlog::warn("mqtt: {}", message);
+  });
 }
 
 MqttSink::Stream& MqttSink::stream_of(std::size_t link, const protocol::Sample& sample) {
@@ -334,11 +389,15 @@ void MqttSink::on_connect(int rc) {
   }
   boost::asio::post(io_, [this, rc] {
     if (rc != 0) {
-      spdlog::warn("mqtt: {} refused the connection: {}", config_.url,
-                   config_.protocol_version == 5 ? mosquitto_reason_string(rc) : mosquitto_connack_string(rc));
+      const std::string refusal =
+          fmt::format("{} refused the connection: {}", config_.url,
+                      config_.protocol_version == 5 ? mosquitto_reason_string(rc) : mosquitto_connack_string(rc));
+      if (refusal != last_error_logged_) spdlog::warn("mqtt: {}", refusal);  // said once, not at every attempt
+      last_error_logged_ = refusal;
       return;
     }
     spdlog::info("mqtt: connected to {}", config_.url);
+    last_error_logged_.clear();
     record_event_(std::nullopt, "mqtt_connected", config_.url, 1);
     report();  // what was dropped while away, now that it can be published
   });

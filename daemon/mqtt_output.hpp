@@ -5,8 +5,9 @@
 //
 // The recording never waits for the broker. on_sample, on the daemon's thread, only decimates, writes the JSON and
 // appends it to a bounded outbox (the oldest message goes when it is full, and is counted); a thread of the sink's own
-// hands the outbox to libmosquitto, whose network thread connects, reconnects with backoff and sends. Drops are
-// logged, recorded as session events and published as events once the broker is back.
+// hands the outbox to libmosquitto, and another runs libmosquitto's loop: it connects, sends, and reconnects with
+// backoff after any failure. Drops are logged, recorded as session events and published as events once the broker
+// is back.
 #include <array>
 #include <condition_variable>
 #include <cstddef>
@@ -74,6 +75,8 @@ class MqttSink final : public pipeline::SessionSink {
                      std::optional<std::int64_t> device_time_us, std::int64_t wall_ns);
   void enqueue(std::size_t link, Topic topic, std::string payload);
   void publish_loop();
+  void network_loop();
+  void on_error(const char* text);
   void report();
   void schedule_report();
   void on_connect(int rc);
@@ -92,6 +95,7 @@ class MqttSink final : public pipeline::SessionSink {
   std::vector<std::uint64_t> drops_to_publish_;                 // by link; daemon thread only
   std::optional<std::int64_t> wall_minus_mono_ns_;              // the wall clock less the monotonic one
   std::int64_t wall_minus_mono_at_ns_ = 0;                      // when (monotonic) it was taken
+  std::string last_error_logged_;                               // libmosquitto's last error message; daemon thread only
   boost::asio::io_context& io_;  // the daemon's: logs, events and the report timer happen on its thread
   Outputs& outputs_;
   std::function<void(std::optional<std::size_t>, std::string, std::string, std::int64_t)> record_event_;
@@ -102,13 +106,16 @@ class MqttSink final : public pipeline::SessionSink {
   mutable std::mutex mutex_;
   std::condition_variable changed_;
   std::deque<Message> outbox_;
-  bool connected_ = false, stopping_ = false;
+  bool connected_ = false;
+  bool stopping_ = false;      // the publishing thread stops
+  bool closing_ = false;       // the connection thread reconnects no more
+  bool abandon_ = false;       // the connection thread ends, connected or not
   std::size_t in_flight_ = 0;  // handed to libmosquitto and not yet written (QoS 0) or acknowledged (QoS 1)
   int status_mid_ = -1;        // the status message in flight, which is not the outbox's
   std::vector<std::uint64_t> dropped_unreported_;  // by link: outbox overflow since the last report
   std::uint64_t lost_unreported_ = 0;              // QoS 0 messages libmosquitto still held when the connection broke
   std::uint64_t enqueued_ = 0, published_ = 0, dropped_ = 0, lost_ = 0, connects_ = 0, disconnects_ = 0;
-  std::thread publisher_;
+  std::thread network_, publisher_;
 };
 
 }  // namespace imubridge::daemon

@@ -43,8 +43,10 @@ bool accepts_connections(std::uint16_t port) {
 // retained messages, as a broker without persistence does).
 class Broker {
  public:
-  explicit Broker(const fs::path& dir) : dir_(dir), port_(free_port()) {
-    std::ofstream(dir_ / "mosquitto.conf") << "listener " << port_ << " 127.0.0.1\nallow_anonymous true\n"
+  // `listener_settings`: more lines for the listener, such as its TLS files.
+  explicit Broker(const fs::path& dir, const std::string& listener_settings = "") : dir_(dir), port_(free_port()) {
+    std::ofstream(dir_ / "mosquitto.conf") << "listener " << port_ << " 127.0.0.1\n"
+                                           << listener_settings << "allow_anonymous true\n"
                                            << "persistence false\nlog_dest stderr\n";
     start();
   }
@@ -87,9 +89,11 @@ struct Received {
 // A subscriber to imubridge/# with libmosquitto, as a dashboard would be; keeps every message in arrival order.
 class Subscriber {
  public:
-  explicit Subscriber(std::uint16_t port) {
+  // `ca_file`: connect with TLS, trusting these CAs.
+  explicit Subscriber(std::uint16_t port, const std::optional<fs::path>& ca_file = std::nullopt) {
     mosquitto_lib_init();
     client_ = mosquitto_new(nullptr, true, this);
+    if (ca_file) mosquitto_tls_set(client_, ca_file->c_str(), nullptr, nullptr, nullptr, nullptr);
     mosquitto_message_callback_set(client_, [](mosquitto*, void* self, const mosquitto_message* m) {
       auto& s = *static_cast<Subscriber*>(self);
       std::lock_guard lock(s.mutex_);
@@ -251,11 +255,22 @@ TEST_F(MqttTest, ABrokerRestartedMidRunCostsNoRecordedSampleAndPublishingResumes
   // Every sample (no cap to speak of), no estimates, an outbox that holds a third of what the outage brings.
   write_config("sample_hz = 100000\nestimate_hz = 0\noutbox = 100\nreconnect_min_s = 1\nreconnect_max_s = 1\n");
   cli::PtyPair pty(tty_);
+  // Fifty at a time, each received before the next: far from filling the outbox, however slow the machine.
+  const auto write_seen_by = [&](const Subscriber& subscriber, std::size_t from, std::size_t to) {
+    for (; from < to; from += 50) {
+      write_paced(pty, part(from, from + 50));
+      ASSERT_TRUE(eventually([&] {
+        const auto seqs = seqs_of(subscriber);
+        return !seqs.empty() && seqs.back() == from + 49;
+      })) << daemon_->log();
+    }
+  };
   start();
+  ASSERT_TRUE(daemon_->wait_for_log("mqtt: connected")) << daemon_->log();
   {
     Subscriber before(broker_.port());
-    write_paced(pty, part(0, 300));
-    ASSERT_TRUE(before.wait_for(kTopic + "sample", 300)) << daemon_->log();
+    write_seen_by(before, 0, 300);
+    ASSERT_EQ(seqs_of(before).size(), 300u);
   }
   broker_.stop(SIGKILL);
   // Once the daemon knows (at once: the kernel closed the broker's sockets), so that none of what follows is written
@@ -266,11 +281,7 @@ TEST_F(MqttTest, ABrokerRestartedMidRunCostsNoRecordedSampleAndPublishingResumes
   broker_.start();
   Subscriber after(broker_.port());
   ASSERT_TRUE(after.wait_for("imubridge/field-1/status", 1)) << daemon_->log();
-  write_paced(pty, part(600, 900));
-  ASSERT_TRUE(eventually([&] {
-    const auto seqs = seqs_of(after);
-    return !seqs.empty() && seqs.back() == kFrames - 1;
-  })) << daemon_->log();
+  write_seen_by(after, 600, kFrames);
   daemon_->signal(SIGUSR1);
   ASSERT_TRUE(daemon_->wait_for_log("stats {")) << daemon_->log();
   stop();
@@ -347,6 +358,82 @@ TEST_F(MqttTest, ABadMqttConfigurationIsOneLineNamingTheKey) {
   const std::string unset = error_of(url + "station = \"s\"\nusername = \"u\"\npassword_env = \"IMUBRIDGE_NO_SUCH\"\n");
   EXPECT_NE(unset.find("outputs.mqtt.password_env"), std::string::npos) << unset;
   EXPECT_NE(unset.find("IMUBRIDGE_NO_SUCH"), std::string::npos) << unset;
+}
+
+TEST_F(MqttTest, QoS1AndAnEstimateCap) {
+  constexpr std::size_t kFrames = 600;  // 3 s at 200 Hz
+  Subscriber subscriber(broker_.port());
+  write_config("qos = 1\nsample_hz = 0\nestimate_hz = 100\n");
+  cli::PtyPair pty(tty_);
+  start();
+  write_paced(pty, simulated_frames(kFrames));
+  ASSERT_TRUE(wait_for_samples(db_, kFrames)) << daemon_->log();
+  stop();
+  ASSERT_TRUE(subscriber.wait_for("imubridge/field-1/status", 2));
+  EXPECT_TRUE(subscriber.on(kTopic + "sample").empty()) << "sample_hz = 0 publishes none";
+  // Every estimate went (QoS 1, and the clean stop waits for the outbox), at most one per 10 ms of device time.
+  const auto estimates = subscriber.on(kTopic + "estimate");
+  ASSERT_GE(estimates.size(), 2u);
+  for (std::size_t i = 1; i < estimates.size(); ++i) {
+    EXPECT_GE(estimates[i].at("timestamp").get<double>() - estimates[i - 1].at("timestamp").get<double>(), 0.00999);
+    EXPECT_GT(estimates[i].at("estimate").at("seq").get<std::uint64_t>(),
+              estimates[i - 1].at("estimate").at("seq").get<std::uint64_t>());
+  }
+  const double span = estimates.back().at("timestamp").get<double>() - estimates.front().at("timestamp").get<double>();
+  EXPECT_GE(estimates.size(), static_cast<std::size_t>(span * 100 * 0.9)) << "the cap, not fewer";
+  const std::string log = daemon_->log();
+  const auto stats = json::parse(
+      log.substr(log.rfind("stats {") + 6, log.find('\n', log.rfind("stats {")) - log.rfind("stats {") - 6));
+  EXPECT_EQ(stats.at("outputs").at("mqtt").at("published"), estimates.size());
+}
+
+// mqtts:// to a broker whose certificate a private CA signed: trusted with ca_file, refused with another CA, and the
+// recording goes on either way.
+TEST(MqttTls, APrivateCaIsTrustedWithCaFileAndAnotherIsRefused) {
+  TempDir dir;
+  ASSERT_EQ(std::system(("exec >/dev/null 2>&1; cd " + dir.path().string() +
+                         " && for ca in ca other; do openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1"
+                         " -nodes -keyout $ca.key -out $ca.crt -days 2 -subj /CN=$ca; done"
+                         " && openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout server.key"
+                         " -out server.csr -subj /CN=localhost"
+                         " && printf 'subjectAltName=IP:127.0.0.1,DNS:localhost\\n' > san.ext"
+                         " && openssl x509 -req -in server.csr -CA ca.crt -CAkey ca.key -CAcreateserial"
+                         " -out server.crt -days 2 -extfile san.ext"
+                         // mosquitto, started as root, reads them as the user "mosquitto"
+                         " && chmod 755 . && chmod 644 *")
+                            .c_str()),
+            0);
+  Broker broker(dir.path(), "cafile " + (dir / "ca.crt").string() + "\ncertfile " + (dir / "server.crt").string() +
+                                "\nkeyfile " + (dir / "server.key").string() + "\n");
+  Subscriber subscriber(broker.port(), dir / "ca.crt");
+  const auto run_with = [&](const std::string& ca, const std::string& db) {
+    std::ofstream(dir / "imubridge.toml")
+        << "[store]\npath = \"" << (dir / db).string() << "\"\nmin_free_mib = 0\n"
+        << "[outputs.mqtt]\nurl = \"mqtts://127.0.0.1:" << broker.port() << "\"\nstation = \"field-1\"\nca_file = \""
+        << (dir / ca).string() << "\"\nreconnect_min_s = 1\nreconnect_max_s = 1\n"
+        << "[[link]]\nname = \"imu\"\ndevice = \"" << (dir / "tty").string() << "\"\n";
+    return std::make_unique<Process>(std::vector<std::string>{"run", "--config", (dir / "imubridge.toml").string()},
+                                     dir / (db + ".stderr"));
+  };
+  cli::PtyPair pty(dir / "tty");
+  {
+    auto daemon = run_with("ca.crt", "trusted.db");
+    ASSERT_TRUE(subscriber.wait_for("imubridge/field-1/status", 1)) << daemon->log();
+    ASSERT_TRUE(daemon->wait_for_log("link 'imu': reading")) << daemon->log();
+    write_paced(pty, simulated_frames(200));
+    ASSERT_TRUE(subscriber.wait_for(kTopic + "estimate", 1)) << daemon->log();
+    daemon->signal(SIGTERM);
+    ASSERT_EQ(daemon->wait(), 0) << daemon->log();
+  }
+  ASSERT_TRUE(subscriber.wait_for("imubridge/field-1/status", 2)) << "online, then offline";
+  const std::size_t statuses = subscriber.on("imubridge/field-1/status").size();
+  auto daemon = run_with("other.crt", "refused.db");
+  ASSERT_TRUE(daemon->wait_for_log("certificate verify failed")) << daemon->log();
+  ASSERT_TRUE(daemon->wait_for_log("link 'imu': reading")) << daemon->log();
+  write_paced(pty, simulated_frames(200));
+  EXPECT_TRUE(wait_for_samples(dir / "refused.db", 200)) << daemon->log();
+  EXPECT_EQ(count_of(daemon->log(), "certificate verify failed"), 1) << "said once, not at every attempt";
+  EXPECT_EQ(subscriber.on("imubridge/field-1/status").size(), statuses) << "never connected";
 }
 
 // The table as written is what a session records of it (to_toml), the password's source but never the password.
