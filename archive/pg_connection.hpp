@@ -64,7 +64,7 @@ class PgConnection {
   void exec(std::string_view sql);
   // Runs one statement with text parameters ($1, $2, ...; nullopt is NULL) and returns its rows.
   PgResult query(std::string_view sql, const std::vector<std::optional<std::string>>& params = {});
-  // COPY ... FROM STDIN with `data` in COPY's text format (copy_text.hpp), in whatever transaction is open.
+  // COPY ... FROM STDIN with `data` in the format the statement names (copy_format.hpp), in the open transaction.
   void copy_in(std::string_view copy_sql, std::string_view data);
   // COPY ... TO STDOUT: each line (COPY's text format, without its newline) to `line`, in order.
   void copy_out(std::string_view copy_sql, const std::function<void(std::string_view line)>& line);

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "archive/archive_schema.hpp"
-#include "archive/copy_text.hpp"
+#include "archive/copy_format.hpp"
 
 namespace imubridge::archive {
 namespace {

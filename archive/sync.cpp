@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "archive/archive_schema.hpp"
-#include "archive/copy_text.hpp"
+#include "archive/copy_format.hpp"
 #include "store/schema.hpp"
 #include "store/sqlite.hpp"
 
@@ -291,8 +291,8 @@ class SessionSync {
     std::int64_t after = archived_up_to(table, session, run);
     const std::string read_sql = "SELECT id" + column_list(table) + " FROM " + std::string(table.name) + " WHERE " +
                                  std::string(table.parent) + " = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
-    const std::string copy_sql =
-        "COPY " + std::string(table.name) + " (station, session_id, id" + column_list(table) + ") FROM STDIN";
+    const std::string copy_sql = "COPY " + std::string(table.name) + " (station, session_id, id" + column_list(table) +
+                                 ") FROM STDIN (FORMAT binary)";
     CopyRows rows;
     while (true) {
       if (options_.stop_requested && options_.stop_requested()) return false;
@@ -312,11 +312,11 @@ class SessionSync {
             add_value(rows, read, static_cast<int>(i) + 1, table.columns[i].kind);
           }
           rows.end_row();
-          if (rows.data().size() >= kMaxBatchBytes) break;
+          if (rows.size() >= kMaxBatchBytes) break;
         }
       }
       if (rows.rows() == 0) return true;
-      pg_.transaction([&] { pg_.copy_in(copy_sql, rows.data()); });
+      pg_.transaction([&] { pg_.copy_in(copy_sql, rows.finish()); });
       count += static_cast<std::int64_t>(rows.rows());
       if (progress_)
         progress_({.session = session, .table = table.name, .rows = static_cast<std::int64_t>(rows.rows())});

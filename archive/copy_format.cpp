@@ -1,5 +1,6 @@
-#include "archive/copy_text.hpp"
+#include "archive/copy_format.hpp"
 
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <limits>
@@ -8,8 +9,6 @@
 
 namespace imubridge::archive {
 namespace {
-
-constexpr char kHex[] = "0123456789abcdef";
 
 int hex_digit(char c) {
   if (c >= '0' && c <= '9') return c - '0';
@@ -56,73 +55,76 @@ std::string unescape(std::string_view field) {
 
 }  // namespace
 
-void CopyRows::separate() {
-  if (!first_) data_ += '\t';
-  first_ = false;
+namespace {
+
+template <typename Unsigned>
+void append_big_endian(std::string& data, Unsigned value) {
+  for (int shift = 8 * static_cast<int>(sizeof(Unsigned)) - 8; shift >= 0; shift -= 8) {
+    data += static_cast<char>((value >> shift) & 0xFF);
+  }
+}
+
+// PGCOPY\n\377\r\n\0, then no flags and no header extension.
+constexpr char kBinaryHeader[] = "PGCOPY\n\377\r\n\0\0\0\0\0\0\0\0\0";
+
+}  // namespace
+
+void CopyRows::clear() {
+  data_.assign(kBinaryHeader, sizeof kBinaryHeader - 1);
+  rows_ = 0;
+  fields_ = 0;
+  row_start_ = data_.size();
+}
+
+void CopyRows::field(std::uint32_t length) {
+  if (fields_ == 0) {
+    row_start_ = data_.size();
+    data_.append(2, '\0');  // the field count, once end_row() knows it
+  }
+  ++fields_;
+  append_big_endian(data_, length);
 }
 
 CopyRows& CopyRows::integer(std::int64_t value) {
-  separate();
-  char text[24];
-  const auto result = std::to_chars(text, text + sizeof text, value);
-  data_.append(text, result.ptr);
+  field(8);
+  append_big_endian(data_, static_cast<std::uint64_t>(value));
   return *this;
 }
 
 CopyRows& CopyRows::real(double value) {
   if (std::isnan(value)) return null();
-  separate();
-  char text[32];
-  // Shortest round trip: PostgreSQL's float8 input reads it back to the same double, -0 and infinities included.
-  const auto result = std::to_chars(text, text + sizeof text, value);
-  data_.append(text, result.ptr);
+  field(8);
+  append_big_endian(data_, std::bit_cast<std::uint64_t>(value));
   return *this;
 }
 
 CopyRows& CopyRows::text(std::string_view value) {
-  separate();
-  for (char c : value) {
-    switch (c) {
-      case '\\':
-        data_ += "\\\\";
-        break;
-      case '\t':
-        data_ += "\\t";
-        break;
-      case '\n':
-        data_ += "\\n";
-        break;
-      case '\r':
-        data_ += "\\r";
-        break;
-      default:
-        data_ += c;
-        break;
-    }
-  }
+  field(static_cast<std::uint32_t>(value.size()));
+  data_.append(value);
   return *this;
 }
 
 CopyRows& CopyRows::bytes(std::span<const std::uint8_t> value) {
-  separate();
-  data_ += "\\\\x";  // bytea's hex form, its backslash escaped for COPY
-  for (std::uint8_t b : value) {
-    data_ += kHex[b >> 4];
-    data_ += kHex[b & 0xF];
-  }
+  field(static_cast<std::uint32_t>(value.size()));
+  data_.append(reinterpret_cast<const char*>(value.data()), value.size());
   return *this;
 }
 
 CopyRows& CopyRows::null() {
-  separate();
-  data_ += "\\N";
+  field(0xFFFFFFFF);  // -1: NULL
   return *this;
 }
 
 void CopyRows::end_row() {
-  data_ += '\n';
+  data_[row_start_] = static_cast<char>(fields_ >> 8);
+  data_[row_start_ + 1] = static_cast<char>(fields_ & 0xFF);
+  fields_ = 0;
   ++rows_;
-  first_ = true;
+}
+
+std::string_view CopyRows::finish() {
+  append_big_endian(data_, std::uint16_t{0xFFFF});  // -1: no more rows
+  return data_;
 }
 
 CopyLine::CopyLine(std::string_view line) {
