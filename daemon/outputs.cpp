@@ -1,5 +1,7 @@
 #include "daemon/outputs.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -12,7 +14,8 @@ namespace {
 // tenth of the daemon's CPU (perf, docs/performance.md); the counters below stay nlohmann::json.
 
 // Shortest text that reads back to the same double (std::to_chars); NaN and infinity, which JSON lacks, as null.
-// A whole number gets ".0", so that parsers read it as a double: "-0" would come back as the integer 0, losing the sign.
+// A whole number gets ".0", so that parsers read it as a double: "-0" would come back as the integer 0, losing the
+// sign.
 void append_number(std::string& out, double value) {
   if (!std::isfinite(value)) {
     out += "null";
@@ -114,7 +117,9 @@ void append_line_members(std::string& out, std::string_view link, const protocol
   append_measurement(out, sample, estimate_or_null);
 }
 
-Outputs::Outputs(boost::asio::io_context& io, const OutputsConfig& config) : io_(io) { reconfigure(config); }
+Outputs::Outputs(boost::asio::io_context& io, const OutputsConfig& config) : io_(io), mqtt_(config.mqtt) {
+  reconfigure(config);
+}
 
 Outputs::~Outputs() {
   for (const auto& stream : line_streams_) stream->close();
@@ -156,6 +161,9 @@ void Outputs::reconfigure(const OutputsConfig& config) {
   line_streams_ = std::move(streams);
   if (!keep_plotjuggler) plotjuggler_ = std::move(plotjuggler);
   decimation_ = config.decimation;
+  if (config.mqtt != mqtt_) {
+    spdlog::warn("SIGHUP: [outputs.mqtt] changed; MQTT goes on as started until the daemon is restarted");
+  }
 }
 
 void Outputs::publish(std::string_view link, const protocol::Sample& sample, const store::Estimate* estimate_or_null) {

@@ -67,6 +67,7 @@ class Outputs {
   std::map<std::string, std::uint64_t, std::less<>> samples_seen_;  // per link, for decimation
   std::uint64_t samples_published_ = 0;
   std::map<std::string, std::function<nlohmann::json()>, std::less<>> other_counters_;
+  std::optional<MqttConfig> mqtt_;  // as started: its sink (daemon/mqtt_output.hpp) keeps it until the next start
 };
 
 }  // namespace imubridge::daemon

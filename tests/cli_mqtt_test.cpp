@@ -43,11 +43,11 @@ bool accepts_connections(std::uint16_t port) {
 // retained messages, as a broker without persistence does).
 class Broker {
  public:
-  // `listener_settings`: more lines for the listener, such as its TLS files.
-  explicit Broker(const fs::path& dir, const std::string& listener_settings = "") : dir_(dir), port_(free_port()) {
+  // `listener_settings`: the listener's lines, such as its TLS files or who may connect.
+  explicit Broker(const fs::path& dir, const std::string& listener_settings = "allow_anonymous true\n")
+      : dir_(dir), port_(free_port()) {
     std::ofstream(dir_ / "mosquitto.conf") << "listener " << port_ << " 127.0.0.1\n"
-                                           << listener_settings << "allow_anonymous true\n"
-                                           << "persistence false\nlog_dest stderr\n";
+                                           << listener_settings << "persistence false\nlog_dest stderr\n";
     start();
   }
   ~Broker() { stop(SIGKILL); }
@@ -368,6 +368,9 @@ TEST_F(MqttTest, QoS1AndAnEstimateCap) {
   start();
   write_paced(pty, simulated_frames(kFrames));
   ASSERT_TRUE(wait_for_samples(db_, kFrames)) << daemon_->log();
+  write_config("qos = 0\n");
+  daemon_->signal(SIGHUP);
+  ASSERT_TRUE(daemon_->wait_for_log("SIGHUP: [outputs.mqtt] changed; MQTT goes on as started")) << daemon_->log();
   stop();
   ASSERT_TRUE(subscriber.wait_for("imubridge/field-1/status", 2));
   EXPECT_TRUE(subscriber.on(kTopic + "sample").empty()) << "sample_hz = 0 publishes none";
@@ -403,8 +406,8 @@ TEST(MqttTls, APrivateCaIsTrustedWithCaFileAndAnotherIsRefused) {
                          " && chmod 755 . && chmod 644 *")
                             .c_str()),
             0);
-  Broker broker(dir.path(), "cafile " + (dir / "ca.crt").string() + "\ncertfile " + (dir / "server.crt").string() +
-                                "\nkeyfile " + (dir / "server.key").string() + "\n");
+  Broker broker(dir.path(), "allow_anonymous true\ncafile " + (dir / "ca.crt").string() + "\ncertfile " +
+                                (dir / "server.crt").string() + "\nkeyfile " + (dir / "server.key").string() + "\n");
   Subscriber subscriber(broker.port(), dir / "ca.crt");
   const auto run_with = [&](const std::string& ca, const std::string& db) {
     std::ofstream(dir / "imubridge.toml")
@@ -434,6 +437,46 @@ TEST(MqttTls, APrivateCaIsTrustedWithCaFileAndAnotherIsRefused) {
   EXPECT_TRUE(wait_for_samples(dir / "refused.db", 200)) << daemon->log();
   EXPECT_EQ(count_of(daemon->log(), "certificate verify failed"), 1) << "said once, not at every attempt";
   EXPECT_EQ(subscriber.on("imubridge/field-1/status").size(), statuses) << "never connected";
+}
+
+// A broker that wants a login: the password from password_env or password_file logs in; a wrong one is refused,
+// said in the log without the password.
+TEST(MqttLogin, ThePasswordFromTheEnvironmentOrAFileLogsInAndAWrongOneIsRefused) {
+  TempDir dir;
+  ASSERT_EQ(std::system(("exec >/dev/null 2>&1; cd " + dir.path().string() +
+                         " && mosquitto_passwd -c -b passwd field-1 s3cret-pw && printf 's3cret-pw\\n' > pw.txt"
+                         " && chmod 755 . && chmod 644 passwd")  // mosquitto reads it as the user "mosquitto"
+                            .c_str()),
+            0);
+  Broker broker(dir.path(), "allow_anonymous false\npassword_file " + (dir / "passwd").string() + "\n");
+  int runs = 0;
+  const auto run_with = [&](const std::string& password_keys, const std::string& password_env_value) {
+    std::ofstream(dir / "imubridge.toml")
+        << "[store]\npath = \"" << (dir / "run.db").string() << "\"\nmin_free_mib = 0\n[outputs.mqtt]\nurl = \""
+        << broker.url() << "\"\nstation = \"field-1\"\nusername = \"field-1\"\n"
+        << password_keys << "reconnect_min_s = 1\nreconnect_max_s = 1\n"
+        << "[[link]]\nname = \"imu\"\ndevice = \"" << (dir / "tty").string() << "\"\n";
+    return std::make_unique<Process>(
+        std::vector<std::string>{"run", "--config", (dir / "imubridge.toml").string()},
+        dir / ("stderr" + std::to_string(++runs)),
+        SpawnOptions{.env = {{"IMUBRIDGE_TEST_MQTT_PASSWORD", password_env_value}}, .file_size_limit = std::nullopt});
+  };
+  for (const std::string& keys : {std::string("password_env = \"IMUBRIDGE_TEST_MQTT_PASSWORD\"\n"),
+                                  "password_file = \"" + (dir / "pw.txt").string() + "\"\n"}) {
+    auto daemon = run_with(keys, "s3cret-pw");
+    EXPECT_TRUE(daemon->wait_for_log("mqtt: connected to " + broker.url())) << keys << daemon->log();
+    daemon->signal(SIGTERM);
+    EXPECT_EQ(daemon->wait(), 0) << daemon->log();
+  }
+  auto daemon = run_with("password_env = \"IMUBRIDGE_TEST_MQTT_PASSWORD\"\n", "wrong-pw");
+  ASSERT_TRUE(daemon->wait_for_log("mqtt: " + broker.url() +
+                                   " refused the connection: Connection Refused: not "
+                                   "authorised."))
+      << daemon->log();
+  daemon->signal(SIGTERM);
+  EXPECT_EQ(daemon->wait(), 0) << daemon->log();
+  EXPECT_EQ(daemon->log().find("wrong-pw"), std::string::npos) << daemon->log();
+  EXPECT_EQ(slurp(dir / "imubridge.toml").find("pw"), std::string::npos) << "only where the password is";
 }
 
 // The table as written is what a session records of it (to_toml), the password's source but never the password.
