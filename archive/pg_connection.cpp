@@ -1,6 +1,7 @@
 #include "archive/pg_connection.hpp"
 
 #include <libpq-fe.h>
+#include <sys/socket.h>
 
 #include <charconv>
 #include <fstream>
@@ -182,6 +183,12 @@ std::string PgConnection::literal(std::string_view value) const {
   std::string text(quoted);
   PQfreemem(quoted);
   return text;
+}
+
+void PgConnection::interrupt() noexcept {
+  // shutdown() wakes a thread blocked on the socket, where close() would leave it waiting (or, worse, let the number
+  // be reused under it).
+  if (const int socket = PQsocket(conn_); socket >= 0) ::shutdown(socket, SHUT_RDWR);
 }
 
 void PgConnection::rollback() noexcept {

@@ -86,6 +86,10 @@ class PgConnection {
   }
   void rollback() noexcept;
 
+  // From another thread: breaks off what the connection waits for (the server's answer to a COPY over a network that
+  // went silent), so the call fails at once instead of after the TCP timeouts. The connection is useless afterwards.
+  void interrupt() noexcept;
+
  private:
   [[noreturn]] void fail(std::string_view what, pg_result* result = nullptr) const;
   PgResult checked(pg_result* result, std::string_view what);

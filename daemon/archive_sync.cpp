@@ -51,6 +51,10 @@ ArchiveSyncThread::ArchiveSyncThread(SyncConfig config, fs::path store_path)
 
 ArchiveSyncThread::~ArchiveSyncThread() {
   thread_.request_stop();  // wakes the wait below; a pass stops before its next batch
+  {
+    std::lock_guard lock(mutex_);
+    if (connection_ != nullptr) connection_->interrupt();
+  }
   thread_.join();
 }
 
@@ -81,7 +85,11 @@ void ArchiveSyncThread::run(std::stop_token stop) {
   while (!stop.stop_requested()) {
     std::chrono::seconds wait = config_.interval;
     try {
-      if (!pg) pg = std::make_unique<archive::PgConnection>(connect_options());
+      if (!pg) {
+        pg = std::make_unique<archive::PgConnection>(connect_options());
+        std::lock_guard lock(mutex_);
+        connection_ = pg.get();
+      }
       archive::SyncCounts total;
       for (const fs::path& file : station_store_files(store_path_)) {
         const auto counts = archive::sync_to_archive(file, *pg,
@@ -98,7 +106,12 @@ void ArchiveSyncThread::run(std::stop_token stop) {
       spdlog::debug("archive sync: {} samples, {} estimates, {} events into {} as station '{}'", total.samples,
                     total.estimates, total.events, archive_name, station);
     } catch (const std::exception& e) {
+      {
+        std::lock_guard lock(mutex_);
+        connection_ = nullptr;
+      }
       pg.reset();  // a new connection for the next pass: this one may be half-way through anything
+      if (stop.stop_requested()) break;  // interrupted by the destructor: not a failure
       wait = retry;
       spdlog::warn("archive sync: {}; retrying in {} s", e.what(), retry.count());
       failing = true;
@@ -107,6 +120,8 @@ void ArchiveSyncThread::run(std::stop_token stop) {
     std::unique_lock lock(mutex_);
     wake_.wait_for(lock, stop, wait, [] { return false; });
   }
+  std::lock_guard lock(mutex_);
+  connection_ = nullptr;  // pg goes with this frame
 }
 
 }  // namespace imubridge::daemon

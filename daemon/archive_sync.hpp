@@ -27,7 +27,8 @@ class ArchiveSyncThread {
  public:
   // Starts syncing at once. The password (password_file or password_env) is read at each connection.
   ArchiveSyncThread(SyncConfig config, std::filesystem::path store_path);
-  // Stops between two batches (or once a call to PostgreSQL returns: at most its timeouts) and joins.
+  // Stops between two batches, breaking off a call to PostgreSQL under way (archive::PgConnection::interrupt), and
+  // joins: the daemon's shutdown never waits for the network (a connection being opened: at most 5 s).
   ~ArchiveSyncThread();
   ArchiveSyncThread(const ArchiveSyncThread&) = delete;
   ArchiveSyncThread& operator=(const ArchiveSyncThread&) = delete;
@@ -40,7 +41,8 @@ class ArchiveSyncThread {
   std::filesystem::path store_path_;
   std::mutex mutex_;
   std::condition_variable_any wake_;
-  std::jthread thread_;  // last: started once everything it uses is ready
+  archive::PgConnection* connection_ = nullptr;  // the thread's connection, for the destructor to interrupt; mutex_
+  std::jthread thread_;                          // last: started once everything it uses is ready
 };
 
 }  // namespace imubridge::daemon
