@@ -185,18 +185,16 @@ std::string local_position(const store::Database& db, const LocalSession& s, con
     store::Statement query(
         db, "SELECT coalesce(max(id), 0) FROM " + std::string(table) + " WHERE " + std::string(parent) + " = ?1");
     query.bind_int(1, of);
-    const std::int64_t id = query.step() ? query.column_int(0) : 0;
-    while (query.step()) {
-    }
-    return std::to_string(id);
+    return std::to_string(query.step() ? query.column_int(0) : 0);  // an aggregate: one row
   };
   std::string position = "ended=" + (s.ended_wall_ns ? std::to_string(*s.ended_wall_ns) : std::string("-")) +
                          " interrupted=" + std::to_string(s.interrupted);
   for (std::string_view table : {"links", "runs", "events", "reference", "samples"}) {
     position += " " + std::string(table) + "=" + largest_id(table, "session_id", s.id);
   }
-  for (std::int64_t run : runs)
+  for (std::int64_t run : runs) {
     position += " estimates." + std::to_string(run) + "=" + largest_id("estimates", "run_id", run);
+  }
   position += " chunks=" + (chunks ? largest_id("chunks", "session_id", s.id) : std::string("-"));
   return position;
 }

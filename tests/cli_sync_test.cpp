@@ -313,10 +313,8 @@ TEST(CliSync, ARerunSendsOnlyWhatIsNew) {
   // What is new in a session synced through is still found: a replay's run, and the chunks once asked for.
   ASSERT_EQ(run_imubridge("replay --db " + (dir / "gs.db").string() + " --session 1").exit_code, 0);
   const auto replayed = run_imubridge(sync);
-  EXPECT_NE(replayed.err.find(" 0 samples, " + std::to_string(local_count(dir / "gs.db", "SELECT count(*) FROM "
-                                                                                         "estimates WHERE run_id = 2")) +
-                              " estimates,"),
-            std::string::npos)
+  const std::int64_t run_2 = local_count(dir / "gs.db", "SELECT count(*) FROM estimates WHERE run_id = 2");
+  EXPECT_NE(replayed.err.find(" 0 samples, " + std::to_string(run_2) + " estimates,"), std::string::npos)
       << replayed.err;
   const auto with_chunks = run_imubridge(sync + " --chunks");
   EXPECT_NE(with_chunks.err.find(" " + std::to_string(local_count(dir / "gs.db", "SELECT count(*) FROM chunks")) +
