@@ -317,7 +317,7 @@ TEST_F(MqttTest, ABrokerRestartedMidRunCostsNoRecordedSampleAndPublishingResumes
 }
 
 TEST_F(MqttTest, TheLastWillSaysOfflineWhenTheDaemonIsKilled) {
-  write_config("keepalive_s = 5\n");
+  write_config("keepalive_s = 5\nprotocol_version = \"5\"\n");
   cli::PtyPair pty(tty_);
   Subscriber subscriber(broker_.port());
   start();
@@ -477,6 +477,17 @@ TEST(MqttLogin, ThePasswordFromTheEnvironmentOrAFileLogsInAndAWrongOneIsRefused)
   EXPECT_EQ(daemon->wait(), 0) << daemon->log();
   EXPECT_EQ(daemon->log().find("wrong-pw"), std::string::npos) << daemon->log();
   EXPECT_EQ(slurp(dir / "imubridge.toml").find("pw"), std::string::npos) << "only where the password is";
+
+  // Under MQTT 5 a refusal ends libmosquitto's own loop (an error, not a refusal, to it): the sink tries again all
+  // the same, and says so once.
+  const auto attempts = [&] { return count_of(slurp(dir / "mosquitto.log"), "New connection from 127.0.0.1"); };
+  daemon = run_with("password_env = \"IMUBRIDGE_TEST_MQTT_PASSWORD\"\nprotocol_version = \"5\"\n", "wrong-pw");
+  ASSERT_TRUE(daemon->wait_for_log("refused the connection: Not authorized")) << daemon->log();
+  const int before = attempts();
+  EXPECT_TRUE(eventually([&] { return attempts() >= before + 2; })) << slurp(dir / "mosquitto.log");
+  daemon->signal(SIGTERM);
+  EXPECT_EQ(daemon->wait(), 0) << daemon->log();
+  EXPECT_EQ(count_of(daemon->log(), "refused the connection"), 1) << daemon->log();
 }
 
 // The table as written is what a session records of it (to_toml), the password's source but never the password.
