@@ -231,7 +231,7 @@ void MqttSink::network_loop() {
       continue;
     }
     if (closing_) break;
-    // Lost, refused, or never made: wait, then try again, min, 2 min, 4 min, ... up to max.
+    // Lost, refused, or never made: try again after reconnect_min, then twice as long each time, up to reconnect_max.
     const auto delay = std::min<std::chrono::milliseconds>(config_.reconnect_max,
                                                            config_.reconnect_min * (1 << std::min(failures, 16)));
     ++failures;
