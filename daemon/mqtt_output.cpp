@@ -122,6 +122,9 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
     check(mosquitto_int_option(client_, MOSQ_OPT_PROTOCOL_VERSION,
                                config_.protocol_version == 5 ? MQTT_PROTOCOL_V5 : MQTT_PROTOCOL_V311),
           "outputs.mqtt.protocol_version");
+    // Live telemetry is many small messages: Nagle's algorithm would hold each behind the broker's delayed ACK of
+    // the one before, tens of milliseconds on a quiet link.
+    check(mosquitto_int_option(client_, MOSQ_OPT_TCP_NODELAY, 1), "outputs.mqtt: TCP_NODELAY");
     // The broker says "offline" for a station that dies without a word: killed, its machine or network gone.
     check(mosquitto_will_set(client_, status_topic_.c_str(), static_cast<int>(offline_payload_.size()),
                              offline_payload_.data(), 1, /*retain=*/true),
