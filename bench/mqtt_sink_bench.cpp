@@ -2,11 +2,8 @@
 // completes an estimate, with the default caps (samples at 50 Hz, every estimate: 1.25 messages per sample). With a
 // mosquitto broker on the loopback that this benchmark starts (broker:1), the sink's threads publish meanwhile; with
 // none (broker:0) the outbox stays full and each message pushes the oldest out. "Time" is per sample.
-#include <arpa/inet.h>
 #include <benchmark/benchmark.h>
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -21,19 +18,10 @@
 #include "daemon/live_sinks.hpp"
 #include "daemon/mqtt_output.hpp"
 #include "daemon/outputs.hpp"
+#include "tests/loopback_port.hpp"
 
 namespace imubridge::daemon {
 namespace {
-
-std::uint16_t free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{.sin_family = AF_INET, .sin_port = 0, .sin_addr = {htonl(INADDR_LOOPBACK)}, .sin_zero = {}};
-  ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address);
-  socklen_t size = sizeof address;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
-  ::close(fd);
-  return ntohs(address.sin_port);
-}
 
 // `mosquitto -c` on 127.0.0.1:port, anonymous, its log discarded.
 class Broker {
@@ -60,7 +48,7 @@ class Broker {
 void BM_MqttOnSample(benchmark::State& state) {
   const bool with_broker = state.range(0) != 0;
   bench::ScratchDir dir;
-  const std::uint16_t port = free_port();
+  const std::uint16_t port = test::free_loopback_port();
   std::unique_ptr<Broker> broker;
   if (with_broker) broker = std::make_unique<Broker>(dir.database().parent_path(), port);
 

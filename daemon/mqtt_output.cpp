@@ -334,12 +334,12 @@ void MqttSink::publish_event(std::size_t link, const std::string& kind, std::int
   event["count"] = count;
   event["detail"] = detail;
   event["wall_ns"] = wall_ns;
-  enqueue(link, Topic::event, event.dump());
+  enqueue(link, Topic::event, event.dump(), /*evicts=*/kind != "mqtt_dropped");
 }
 
-void MqttSink::enqueue(std::size_t link, Topic topic, std::string payload) {
+void MqttSink::enqueue(std::size_t link, Topic topic, std::string payload, bool evicts) {
   std::lock_guard lock(mutex_);
-  if (outbox_.size() >= config_.outbox) {
+  while (evicts && !outbox_.empty() && outbox_.size() >= config_.outbox) {
     ++dropped_unreported_[outbox_.front().link];
     ++dropped_;
     outbox_.pop_front();

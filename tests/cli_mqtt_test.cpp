@@ -1,10 +1,7 @@
 // `imubridge run` publishing to a real Mosquitto broker that the test starts on a free loopback port: messages in
 // order and in the line streams' JSON, a broker killed and restarted mid-run costing no recorded sample, the last
 // will on kill -9, and one-line errors for a bad [outputs.mqtt].
-#include <arpa/inet.h>
 #include <mosquitto.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 
 #include <fstream>
 #include <mutex>
@@ -13,22 +10,12 @@
 #include "daemon/config_file.hpp"
 #include "pipeline/estimation_stage.hpp"
 #include "tests/cli_run_harness.hpp"
+#include "tests/loopback_port.hpp"
 
 namespace imubridge::test {
 namespace {
 
 using nlohmann::json;
-
-// A port nobody listens on now (the kernel's pick), for a broker to take.
-std::uint16_t free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{.sin_family = AF_INET, .sin_port = 0, .sin_addr = {htonl(INADDR_LOOPBACK)}, .sin_zero = {}};
-  ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address);
-  socklen_t size = sizeof address;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
-  ::close(fd);
-  return ntohs(address.sin_port);
-}
 
 bool accepts_connections(std::uint16_t port) {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -45,7 +32,7 @@ class Broker {
  public:
   // `listener_settings`: the listener's lines, such as its TLS files or who may connect.
   explicit Broker(const fs::path& dir, const std::string& listener_settings = "allow_anonymous true\n")
-      : dir_(dir), port_(free_port()) {
+      : dir_(dir), port_(test::free_loopback_port()) {
     std::ofstream(dir_ / "mosquitto.conf") << "listener " << port_ << " 127.0.0.1\n"
                                            << listener_settings << "persistence false\nlog_dest stderr\n";
     start();

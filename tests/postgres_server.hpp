@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <string>
 
+#include "tests/loopback_port.hpp"
+
 namespace imubridge::test {
 
 struct PostgresServerOptions {
@@ -43,8 +45,5 @@ class PostgresServer {
   std::uint16_t port_ = 0;
   bool running_ = false;
 };
-
-// A loopback TCP port nothing listens on right now.
-std::uint16_t free_loopback_port();
 
 }  // namespace imubridge::test
