@@ -130,9 +130,10 @@ class SessionRestore {
                                          .detail = row.text(5)});
       ++result_.events;
     });
-    for (const auto& [archived_run, local_run] : runs) {
+    for (const auto& run : runs) {
+      const std::int64_t local_run = run.second;  // a lambda may not capture a structured binding before clang 16
       each_row("link_id, seq, t_s, fx, fy, vx, vy, var_vx, var_vy", "estimates",
-               " AND run_id = " + std::to_string(archived_run), [&](const CopyLine& row) {
+               " AND run_id = " + std::to_string(run.first), [&](const CopyLine& row) {
                  local_store_->append_estimate(local_run, {.link_id = local_link(row.integer(0)),
                                                            .seq = static_cast<std::uint64_t>(row.integer(1)),
                                                            .t_s = row.real(2),
