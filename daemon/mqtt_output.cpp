@@ -326,7 +326,7 @@ void MqttSink::on_sample(std::size_t link, const protocol::Sample& sample, std::
 }
 
 void MqttSink::publish_event(std::size_t link, const std::string& kind, std::int64_t count, const std::string& detail,
-                             std::optional<std::int64_t> device_time_us, std::int64_t wall_ns) {
+                             std::optional<std::int64_t> device_time_us, std::int64_t wall_ns, bool evicts) {
   nlohmann::json event;
   if (device_time_us) event["timestamp"] = static_cast<double>(*device_time_us) / 1e6;
   event["link"] = link_names_.at(link);
@@ -334,7 +334,7 @@ void MqttSink::publish_event(std::size_t link, const std::string& kind, std::int
   event["count"] = count;
   event["detail"] = detail;
   event["wall_ns"] = wall_ns;
-  enqueue(link, Topic::event, event.dump(), /*evicts=*/kind != "mqtt_dropped");
+  enqueue(link, Topic::event, event.dump(), evicts);
 }
 
 void MqttSink::enqueue(std::size_t link, Topic topic, std::string payload, bool evicts) {
@@ -479,7 +479,7 @@ void MqttSink::report() {
     if (drops_to_publish_[link] == 0) continue;
     publish_event(link, "mqtt_dropped", static_cast<std::int64_t>(std::exchange(drops_to_publish_[link], 0)),
                   "messages of this link dropped from the outbox while the broker was away or slow", std::nullopt,
-                  wall_ns);
+                  wall_ns, /*evicts=*/false);
   }
 }
 

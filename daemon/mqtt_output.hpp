@@ -72,7 +72,7 @@ class MqttSink final : public pipeline::SessionSink {
 
   Stream& stream_of(std::size_t link, const protocol::Sample& sample);
   void publish_event(std::size_t link, const std::string& kind, std::int64_t count, const std::string& detail,
-                     std::optional<std::int64_t> device_time_us, std::int64_t wall_ns);
+                     std::optional<std::int64_t> device_time_us, std::int64_t wall_ns, bool evicts = true);
   // Appends to the outbox, dropping the oldest beyond its bound. A report of drops (`evicts` false) goes in over
   // the bound instead: the message saying that data was dropped must not drop more of it. The next message that
   // evicts brings the outbox back within its bound.
