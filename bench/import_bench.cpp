@@ -70,6 +70,27 @@ std::uint64_t samples_of(Import import) {
   return import(store).samples;
 }
 
+// Each iteration imports into a fresh store, timed from the import's start to the store closed (closing commits
+// what is pending: part of the import); creating the scratch directory and the store is not timed. The samples of
+// one import.
+template <typename Import>
+std::uint64_t import_into_fresh_stores(benchmark::State& state, Import import) {
+  std::uint64_t samples = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    {
+      const ScratchDir dir;
+      auto store = std::make_unique<store::Store>(dir.database());
+      state.ResumeTiming();
+      samples = import(*store).samples;
+      store.reset();
+      state.PauseTiming();
+    }
+    state.ResumeTiming();
+  }
+  return samples;
+}
+
 void report(benchmark::State& state, std::uint64_t samples, std::uint64_t bytes) {
   state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * samples));
   state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations() * bytes));
@@ -78,19 +99,8 @@ void report(benchmark::State& state, std::uint64_t samples, std::uint64_t bytes)
 
 void BM_UlogImport(benchmark::State& state) {
   const fs::path file = ulog_file();
-  std::uint64_t samples = 0;
-  for (auto _ : state) {
-    state.PauseTiming();
-    {
-      const ScratchDir dir;
-      auto store = std::make_unique<store::Store>(dir.database());
-      state.ResumeTiming();
-      samples = import_ulog(*store, {.file = file}).samples;
-      store.reset();  // closing commits what is pending: part of the import
-      state.PauseTiming();
-    }
-    state.ResumeTiming();
-  }
+  const std::uint64_t samples =
+      import_into_fresh_stores(state, [&](store::Store& store) { return import_ulog(store, {.file = file}); });
   report(state, samples, fs::file_size(file));
   state.SetLabel(file.filename().string());
 }
@@ -111,19 +121,8 @@ BENCHMARK(BM_UlogRead)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 void BM_TlogImport(benchmark::State& state) {
   const fs::path& file = tlog_file();
-  std::uint64_t samples = 0;
-  for (auto _ : state) {
-    state.PauseTiming();
-    {
-      const ScratchDir dir;
-      auto store = std::make_unique<store::Store>(dir.database());
-      state.ResumeTiming();
-      samples = import_tlog(*store, {.file = file}).samples;
-      store.reset();
-      state.PauseTiming();
-    }
-    state.ResumeTiming();
-  }
+  const std::uint64_t samples =
+      import_into_fresh_stores(state, [&](store::Store& store) { return import_tlog(store, {.file = file}); });
   report(state, samples, fs::file_size(file));
 }
 BENCHMARK(BM_TlogImport)->Unit(benchmark::kMillisecond)->MinTime(2.0);

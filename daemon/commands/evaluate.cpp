@@ -42,7 +42,7 @@ int run(const EvaluateCliOptions& o) {
   const pipeline::SessionSeries session = pipeline::read_session_series(
       store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  const est::TimeWindow span = percent_span(session.series, o.in_flight);
+  const est::TimeWindow span = percent_span(session.series, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
   const est::VelocityEvaluation e =

@@ -1,7 +1,9 @@
 // `imubridge import euroc|ulog|tlog`: an EuRoC/ASL dataset, a PX4 ULog file or a MAVLink telemetry log into a new
 // session, from bytes like a recorded flight, with its reference trajectory. docs/replay.md.
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <cstdio>
+#include <map>
 #include <string>
 
 #include "daemon/command.hpp"
@@ -33,25 +35,71 @@ void print_lines(const char* what, const replay::ImportedFile& file, const repla
   for (const auto& line : lines.summary()) std::fprintf(stderr, "  %s\n", line.c_str());
 }
 
+// What ulog and tlog take of the shared options: the resolutions and axes only where given, else their own defaults.
+template <typename ImportOptions>
+void apply_given(const ImportCommandOptions& o, ImportOptions& options) {
+  if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
+  if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
+  if (o.imu_axes_given) options.imu_axes = o.imu_axes;
+}
+
+// The first line of a log's import (ulog, tlog): what became the session.
+template <typename ImportResult>
+void print_imported_log(const ImportCommandOptions& o, const ImportResult& r) {
+  std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
+               static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
+               static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
+               static_cast<long long>(r.session));
+}
+
+void print_axes(const estimator::AxesResolution& axes) {
+  std::fprintf(stderr, "%s\n", axes.description.c_str());
+  if (axes.mismatch) std::fprintf(stderr, "warning: %s\n", axes.mismatch->c_str());
+  if (axes.note) std::fprintf(stderr, "note: %s\n", axes.note->c_str());
+}
+
+void print_reference_skipped(const std::map<std::string, std::uint64_t>& skipped) {
+  for (const auto& [reason, count] : skipped) {
+    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
+  }
+}
+
+// When the vehicle flew, by PX4's land detector, in seconds from the first sample.
+void print_airborne(const replay::UlogImportResult& r) {
+  if (!r.airborne) {
+    std::fprintf(stderr, "airborne: unknown (no vehicle_land_detected record in the log)\n");
+    return;
+  }
+  if (r.airborne->empty()) {
+    std::fprintf(stderr, "airborne: never (vehicle_land_detected says landed throughout)\n");
+    return;
+  }
+  double total_s = 0;
+  std::string intervals;
+  for (const auto& flight : *r.airborne) {
+    const double from_s = (static_cast<double>(flight.from_us) - static_cast<double>(r.first_us)) * 1e-6;
+    const double to_s = (static_cast<double>(flight.to_us) - static_cast<double>(r.first_us)) * 1e-6;
+    total_s += to_s - from_s;
+    char text[64];
+    std::snprintf(text, sizeof text, "%s%.1f-%.1f s", intervals.empty() ? "" : ", ", from_s, to_s);
+    intervals += text;
+  }
+  std::fprintf(stderr, "airborne: %.1f s (vehicle_land_detected; from the first sample: %s)\n", total_s,
+               intervals.c_str());
+}
+
 int run_import_ulog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a ULog file holds its own");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
-  if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
-  if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
-  if (o.imu_axes_given) options.imu_axes = o.imu_axes;
+  apply_given(o, options);
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);
   options.progress = progress.callback();
   const auto r = replay::import_ulog(store, options);
   progress.finish();
-  std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
-               static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
-               static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
-               static_cast<long long>(r.session));
-  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
-  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
-  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
+  print_imported_log(o, r);
+  print_axes(r.axes);
   for (const auto& [reason, count] : r.skipped) {
     std::fprintf(stderr, "skipped %llu %s records: %s\n", static_cast<unsigned long long>(count), r.imu_source.c_str(),
                  reason.c_str());
@@ -68,27 +116,8 @@ int run_import_ulog(const ImportCommandOptions& o) {
     std::fprintf(stderr, "reference: %llu rows (vehicle_local_position, attitude from vehicle_attitude)\n",
                  static_cast<unsigned long long>(r.reference_rows));
   }
-  for (const auto& [reason, count] : r.reference_skipped) {
-    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
-  }
-  if (!r.airborne) {
-    std::fprintf(stderr, "airborne: unknown (no vehicle_land_detected record in the log)\n");
-  } else if (r.airborne->empty()) {
-    std::fprintf(stderr, "airborne: never (vehicle_land_detected says landed throughout)\n");
-  } else {
-    double total_s = 0;
-    std::string intervals;
-    for (const auto& flight : *r.airborne) {
-      const double from_s = (static_cast<double>(flight.from_us) - static_cast<double>(r.first_us)) * 1e-6;
-      const double to_s = (static_cast<double>(flight.to_us) - static_cast<double>(r.first_us)) * 1e-6;
-      total_s += to_s - from_s;
-      char text[64];
-      std::snprintf(text, sizeof text, "%s%.1f-%.1f s", intervals.empty() ? "" : ", ", from_s, to_s);
-      intervals += text;
-    }
-    std::fprintf(stderr, "airborne: %.1f s (vehicle_land_detected; from the first sample: %s)\n", total_s,
-                 intervals.c_str());
-  }
+  print_reference_skipped(r.reference_skipped);
+  print_airborne(r);
   std::fprintf(
       stderr, "events: %llu logged strings, %llu dropouts (%llu ms)%s\n", static_cast<unsigned long long>(r.log_events),
       static_cast<unsigned long long>(r.dropouts), static_cast<unsigned long long>(r.dropout_ms),
@@ -104,26 +133,19 @@ int run_import_ulog(const ImportCommandOptions& o) {
 int run_import_tlog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a tlog holds its own");
   replay::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
-  if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
-  if (o.gyro_lsb_given) options.gyro_lsb = o.gyro_lsb;
-  if (o.imu_axes_given) options.imu_axes = o.imu_axes;
+  apply_given(o, options);
   if (!o.imu_message.empty()) options.imu_message = o.imu_message;
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);
   options.progress = progress.callback();
   const auto r = replay::import_tlog(store, options);
   progress.finish();
-  std::fprintf(stderr, "imported %llu IMU samples (%s, %.1f s) of %s into %s as session %lld\n",
-               static_cast<unsigned long long>(r.samples), r.imu_source.c_str(),
-               static_cast<double>(r.last_us - r.first_us) * 1e-6, o.dir.c_str(), o.db.c_str(),
-               static_cast<long long>(r.session));
+  print_imported_log(o, r);
   std::fprintf(stderr, "%llu records, every frame kept as received%s\n", static_cast<unsigned long long>(r.records),
                r.unverified > 0
                    ? (" (" + std::to_string(r.unverified) + " of ids in no dialect known here, kept unchecked)").c_str()
                    : "");
-  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
-  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
-  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
+  print_axes(r.axes);
   for (const auto& [reason, count] : r.skipped) {
     std::fprintf(stderr, "skipped %llu IMU messages: %s\n", static_cast<unsigned long long>(count), reason.c_str());
   }
@@ -142,9 +164,7 @@ int run_import_tlog(const ImportCommandOptions& o) {
     std::fprintf(stderr, "reference: %llu rows (%s)\n", static_cast<unsigned long long>(r.reference_rows),
                  r.reference_source.c_str());
   }
-  for (const auto& [reason, count] : r.reference_skipped) {
-    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
-  }
+  print_reference_skipped(r.reference_skipped);
   std::fprintf(stderr, "events: %llu STATUSTEXT messages, %llu gaps in the log's time over %g s (%.1f s)%s\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.gaps),
                static_cast<double>(replay::kTlogGapUs) * 1e-6, r.gap_s,
@@ -180,9 +200,7 @@ int run_import(const ImportCommandOptions& o) {
   std::fprintf(stderr, "imported %llu IMU rows of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.imu.rows), r.imu.path.c_str(), o.db.c_str(),
                static_cast<long long>(r.session));
-  std::fprintf(stderr, "%s\n", r.axes.description.c_str());
-  if (r.axes.mismatch) std::fprintf(stderr, "warning: %s\n", r.axes.mismatch->c_str());
-  if (r.axes.note) std::fprintf(stderr, "note: %s\n", r.axes.note->c_str());
+  print_axes(r.axes);
   print_lines("skipped", r.imu, r.imu.skipped);
   print_lines("warning: clipped values in", r.imu, r.clipped);
   if (r.reference) {

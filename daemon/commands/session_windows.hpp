@@ -24,7 +24,7 @@ struct PercentSpan {
   std::optional<estimator::TimeWindow> flight;
 };
 
-inline PercentSpan percent_span_of(const estimator::ImuSeries& series, bool in_flight) {
+inline PercentSpan percent_span(const estimator::ImuSeries& series, bool in_flight) {
   const estimator::TimeWindow whole = estimator::data_span(series.t);
   if (!in_flight) return {whole, std::nullopt};
   if (const std::optional<estimator::FlightSpan> flight = estimator::detect_flight(series)) {
@@ -35,10 +35,6 @@ inline PercentSpan percent_span_of(const estimator::ImuSeries& series, bool in_f
                "warning: --in-flight: no part at rest to tell the flight from (the accelerometer's vibration level "
                "hardly changes); percentages are of the whole session\n");
   return {whole, std::nullopt};
-}
-
-inline estimator::TimeWindow percent_span(const estimator::ImuSeries& series, bool in_flight) {
-  return percent_span_of(series, in_flight).window;
 }
 
 // A window in seconds (or the default one) is of the session even with --in-flight: a fit that runs mostly on the
@@ -66,7 +62,7 @@ struct WindowArgs {
   // The windows, resolved against the series (nullopt: the command's default).
   std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> resolve(
       const estimator::ImuSeries& series) const {
-    const PercentSpan span = percent_span_of(series, in_flight);
+    const PercentSpan span = percent_span(series, in_flight);
     std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> out;
     if (train) out.first = estimator::parse_window(*train, span.window);
     if (validate) out.second = estimator::parse_window(*validate, span.window);
