@@ -127,13 +127,16 @@ class Daemon::RecordingSink final : public pipeline::SessionSink {
 Daemon::Daemon(Config config, std::optional<fs::path> config_file)
     : config_(std::move(config)),
       config_file_(std::move(config_file)),
-      params_(config_.params ? estimator::load_params(*config_.params) : estimator::ModelParams{}),
+      // A live flight is never the one PARAMS.json's conditions were fitted on: it flies the vehicle's calibration.
+      params_(config_.params ? estimator::for_flight(estimator::load_params(*config_.params), "", &params_note_)
+                             : estimator::ModelParams{}),
       signals_(io_, SIGINT, SIGTERM, SIGHUP),
       commit_timer_(io_),
       stats_timer_(io_),
       watchdog_timer_(io_),
       resume_timer_(io_) {
   signals_.add(SIGUSR1);
+  if (!params_note_.empty()) spdlog::info("{}", params_note_);
   // Each link's declared IMU axes, and an XBee radio takes the axes of the link it is heard through: while not
   // recording its id says which (pipeline::is_unrecorded_radio_id); while recording it is a store link named after
   // that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.

@@ -103,6 +103,7 @@ class Daemon {
 
   Config config_;
   std::optional<std::filesystem::path> config_file_;
+  std::string params_note_;  // what PARAMS.json held that this flight does not fly with (filled by params_'s init)
   estimator::ModelParams params_;
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;

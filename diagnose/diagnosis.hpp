@@ -72,6 +72,7 @@ struct ModelFit {
   double rmse_train = 0.0;          // m/s^2, over the axes diagnosed
   double rmse_validation = 0.0;     // m/s^2
   std::vector<double> convergence;  // cost (sqrt of the sum of squared residuals) after each solver iteration
+  std::string std_error_failure;    // why the standard errors (NaN then) could not be computed; empty when they were
   // Parameters at or within 1 % of a bound of their search range: the data pushed them there, so their value says
   // more about the range than about the vehicle. One readable line each.
   std::vector<std::string> at_bounds;
@@ -79,6 +80,9 @@ struct ModelFit {
   // the base model is reported with them).
   std::vector<std::string> implausible;
   std::optional<estimator::VelocityScores> velocity;  // the estimator run with this model; with a reference only
+  // The filter's log-likelihood of the accelerometer with this model (estimator::filter_log_likelihood); from the IMU
+  // alone (velocity `filter` or `imu`), where it is what a step is judged by.
+  std::optional<estimator::FilterLikelihood> likelihood;
 };
 
 // One candidate tried at one step of the greedy search.
@@ -89,8 +93,13 @@ struct CandidateTrial {
   double statistic = 0.0;  // the significance rule's statistic (docs/effects.md, "The significance rule")
   double p_value = 1.0;
   bool significant = false;
-  // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level) or the
-  // minimum-gain rule (its gain against the minimum). Empty for the one added.
+  // What the candidate does for what users fly with (docs/effects.md, "The rules"): with the reference as the
+  // velocity, the estimator's validation velocity RMSE (m/s); from the IMU alone, the filter's validation
+  // log-likelihood per measurement (nats). A step must improve it.
+  std::optional<double> velocity_validation;
+  std::optional<double> likelihood_validation;
+  // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level), the
+  // minimum-gain rule (its gain against the minimum), or the velocity or likelihood rule. Empty for the one added.
   std::string rejected_by;
   std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit,
                         // physically implausible)

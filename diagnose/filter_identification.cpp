@@ -76,6 +76,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
 
   const Signals signals = prepare_signals(series, options.derivative_half_window);
   const estimator::Windows windows = estimator::resolve_windows(signals.t, options.train, options.validate);
+  estimator::require_trainable(windows.train);
   const Range train = range_of(signals, windows.train), validation = range_of(signals, windows.validate);
   DiagnoseOptions diagnose_options;
   diagnose_options.train = windows.train;
@@ -112,6 +113,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
   record_fit(result.params, model, fit.values, train, validation);
   result.params.identification.method = "filter-error";
   result.params.effects.clear();  // identify's blocks, not effects a diagnosis added
+  result.params.conditions_flight = estimator::flight_identity(series);
 
   // identify names each parameter by its PARAMS.json path; the filter's process noise, which has none, by its own.
   std::vector<std::string> paths = parameter_paths(model);

@@ -36,13 +36,14 @@ std::vector<Parameter> base_parameters(const ModelSetup& setup) {
   if (setup.base == ModelKind::paper) {
     for (int axis : setup.axes) {
       const std::string a = axis_name(axis) + ".";
-      out.push_back({a + "r", "m", 0.0, 0.0});
+      out.push_back({a + "r", "m", 0.0, 0.0, setup.lever_arm_bound});
       out.push_back({.name = a + "beta", .unit = "rad", .periodic = true});
       out.push_back({.name = a + "alpha", .unit = "rad", .periodic = true});
       out.push_back({a + "mu", "1/m", 0.0, 0.0});
     }
   } else {
-    for (int i = 0; i < 3; ++i) out.push_back({"lever_arm." + std::to_string(i), "m"});
+    for (int i = 0; i < 3; ++i)
+      out.push_back({"lever_arm." + std::to_string(i), "m", 0.0, -setup.lever_arm_bound, setup.lever_arm_bound});
     for (int i = 0; i < 3; ++i) out.push_back({"mounting." + std::to_string(i), "rad"});
   }
   if (setup.velocity == VelocitySource::filter) {
@@ -297,6 +298,9 @@ double Model::process_noise(std::span<const double> p) const {
 }
 
 bool Model::inert(std::size_t i) const {
+  // A parameter whose bounds meet is held there (the base's lever arm at the mass centre, when the data cannot place
+  // it inside the plausibility table).
+  if (parameters_[i].lower == parameters_[i].upper) return true;
   return setup_.velocity == VelocitySource::filter && !filter_runs() && i + 1 == base_size_;
 }
 
@@ -577,6 +581,7 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   // An inert parameter moves nothing: held at its start, it leaves the covariance of the others computable.
   if (!held.empty()) problem.SetManifold(x, new ceres::SubsetManifold(static_cast<int>(params.size()), held));
   for (std::size_t i = 0; i < params.size(); ++i) {
+    if (model.inert(i)) continue;
     if (std::isfinite(params[i].lower)) problem.SetParameterLowerBound(x, static_cast<int>(i), params[i].lower);
     if (std::isfinite(params[i].upper)) problem.SetParameterUpperBound(x, static_cast<int>(i), params[i].upper);
   }

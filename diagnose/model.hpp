@@ -50,7 +50,8 @@ class Model {
   // True when the velocity comes from the filter and the model has a drag for it to fuse (else it has nothing to
   // measure and no prediction reads a velocity): every evaluation then runs it.
   bool filter_runs() const;
-  // True for a parameter nothing depends on: the filter's process noise while the filter has no drag to run with.
+  // True for a parameter held at its start: one nothing depends on (the filter's process noise while the filter has no
+  // drag to run with), or one whose bounds meet.
   bool inert(std::size_t i) const;
   // velocity `filter`: the filter's process noise at p (m/s^2/sqrt(Hz)), the base's last parameter; else the setup's.
   double process_noise(std::span<const double> p) const;

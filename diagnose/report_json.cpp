@@ -125,6 +125,8 @@ json fit_json(const Diagnosis& d, const ModelFit& fit, const std::vector<Residua
   out["rmse_train"] = number(fit.rmse_train);
   out["rmse_validation"] = number(fit.rmse_validation);
   out["velocity_rmse_m_s"] = velocity_json(fit.velocity);
+  if (fit.likelihood)
+    out["likelihood"] = {{"train", number(fit.likelihood->train)}, {"validation", number(fit.likelihood->validation)}};
   out["residual"] = residuals_json(d, residual);
   out["residual_white"] = whiteness(residual);
   return out;
@@ -140,6 +142,8 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
                     {"statistic", number(c.statistic)},
                     {"p_value", number(c.p_value)},
                     {"significant", c.significant},
+                    {"velocity_validation_m_s", c.velocity_validation ? number(*c.velocity_validation) : json()},
+                    {"likelihood_validation", c.likelihood_validation ? number(*c.likelihood_validation) : json()},
                     {"rejected_by", c.rejected_by},
                     {"skipped", c.skipped}});
   }

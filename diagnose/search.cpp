@@ -68,6 +68,29 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
   return why;
 }
 
+// Why the parameters [first, end) of a fit are not determined by the data, or nullopt: a standard error that cannot
+// be computed, or standard errors as large as the values themselves (the data cannot tell the effect from none).
+std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
+  double value_norm = 0.0, error_norm = 0.0;
+  for (std::size_t i = first; i < fit.values.size(); ++i) {
+    const double se = fit.std_errors.empty() ? std::numeric_limits<double>::quiet_NaN() : fit.std_errors[i];
+    if (!std::isfinite(se)) {
+      return "undetermined: the standard error of " + model.parameters()[i].name + " cannot be computed (" +
+             (fit.covariance_failure.empty() ? std::string("the covariance is singular") : fit.covariance_failure) +
+             ")";
+    }
+    value_norm += fit.values[i] * fit.values[i];
+    error_norm += se * se;
+  }
+  if (error_norm < value_norm) return std::nullopt;
+  char why[200];
+  std::snprintf(why, sizeof why,
+                "undetermined: its parameters' standard errors (norm %.3g) are as large as their values (norm %.3g): "
+                "the data cannot tell it from none",
+                std::sqrt(error_norm), std::sqrt(value_norm));
+  return why;
+}
+
 // The current model: its effects, fitted values and what they give.
 struct State {
   std::vector<const Effect*> effects;
@@ -119,6 +142,7 @@ ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range 
   out.rmse_train = model.rmse(fit.values, train);
   out.rmse_validation = model.rmse(fit.values, validation);
   out.convergence = fit.convergence;
+  out.std_error_failure = fit.covariance_failure;
   return out;
 }
 
@@ -174,6 +198,7 @@ std::vector<std::string> parameters_at_bounds(std::span<const Parameter> params,
   std::vector<std::string> out;
   for (std::size_t i = 0; i < params.size(); ++i) {
     const Parameter& p = params[i];
+    if (p.lower == p.upper) continue;  // held there, not pushed
     // Within 1 % of the bound's own size; a bound of zero (no negative drag) only when the fit sits on it, as a
     // bounded solver leaves a parameter it pushed there.
     const auto near = [&](double bound) {
@@ -277,6 +302,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   if (options.max_steps < 0) throw std::invalid_argument("diagnose: the number of steps cannot be negative");
 
   const estimator::Windows windows = estimator::resolve_windows(signals.t, options.train, options.validate);
+  estimator::require_trainable(windows.train);
   const Range train = range_of(signals, windows.train), validation = range_of(signals, windows.validate);
   // analyse_residual's minimum, and enough to fit anything.
   constexpr std::size_t kMinSamples = 64;
@@ -305,19 +331,64 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
                       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()});
   };
   report_progress(0, "base", false, 0, 1);
-  const Model base_model(signals, setup);
-  State current = settle(base_model, fit(base_model, base_model.base_start(train), train), train, validation);
-  // The model as the live estimator will run it, what it does for the velocity, and whether it is plausible.
+  // The model as the live estimator will run it, what it does for the velocity (with a reference) or how likely the
+  // filter finds the accelerometer with it (from the IMU alone), and whether it is plausible.
+  const bool judged_by_velocity = setup.velocity == VelocitySource::reference;
   const auto judge = [&](const Model& model, State& state) {
     state.params = live_params(model, state.fit.values, state.fit.std_errors);
     record_fit(state.params, model, state.fit.values, train, validation);
     state.summary.velocity = estimator::score_velocity(series, state.params, windows);
+    if (!judged_by_velocity) state.summary.likelihood = estimator::filter_log_likelihood(series, state.params, windows);
+    state.summary.implausible.clear();
+    state.implausible_limits.clear();
     for (const estimator::Implausibility& i : estimator::check_plausibility(state.params.full, options.limits)) {
       state.summary.implausible.push_back(i.message);
       state.implausible_limits.push_back(i.limit);
     }
   };
-  judge(base_model, current);
+  const auto fit_base = [&] {
+    const Model base(signals, setup);
+    State state = settle(base, fit(base, base.base_start(train), train), train, validation);
+    judge(base, state);
+    return state;
+  };
+  State current = fit_base();
+  if (!current.summary.implausible.empty()) {
+    // A base no airframe has is not carried on: it is fitted again with its lever arm inside the table (a box
+    // inscribed in the table's sphere for the 3-D model), from the same start.
+    std::string was = current.summary.implausible.front();
+    setup.lever_arm_bound = options.model == ModelKind::full ? options.limits.lever_arm / std::sqrt(3.0)
+                                                              : options.limits.lever_arm;
+    current = fit_base();
+    char text[480];
+    std::snprintf(text, sizeof text,
+                  "the base model's first fit was implausible (%s); it was fitted again with each lever-arm component "
+                  "within +-%.3g m",
+                  was.c_str(), setup.lever_arm_bound);
+    out.warnings.emplace_back(text);
+    const auto lever_arm_at_bound = [&] {
+      const std::vector<Parameter> base = Model(signals, setup).parameters();
+      for (std::size_t i = 0; i < base.size() && i < current.fit.values.size(); ++i) {
+        if (base[i].unit == "m" && std::abs(std::abs(current.fit.values[i]) - setup.lever_arm_bound) <=
+                                       kAtBoundFraction * setup.lever_arm_bound)
+          return true;
+      }
+      return false;
+    };
+    if (lever_arm_at_bound() || !current.summary.implausible.empty()) {
+      // Pushed to the edge of the box, the lever arm is not placed by these data either: the IMU is taken at the
+      // mass centre, the assumption that claims least.
+      setup.lever_arm_bound = 0.0;
+      current = fit_base();
+      out.warnings.emplace_back(
+          "inside the table the lever arm went to the edge of its range: the data do not place it, and it is held at "
+          "the mass centre (0, 0, 0)");
+    }
+    if (!current.summary.implausible.empty())
+      throw std::invalid_argument("diagnose: the base model is implausible even with its lever arm inside the "
+                                  "plausibility table: " + current.summary.implausible.front());
+  }
+  const Model base_model(signals, setup);
   out.base = current.summary;
   if (series.reference)
     out.zero_velocity = estimator::zero_velocity_scores(series, current.params.full.mounting, windows);
@@ -410,9 +481,16 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           for (std::size_t i = 1; i < implausible.size(); ++i) trial.skipped += "; " + implausible[i].message;
           return {trial, std::nullopt};
         }
+        if (auto why = undetermined(model, best, offset)) {
+          trial.skipped = *why;
+          return {trial, std::nullopt};
+        }
         State candidate = settle(model, std::move(best), train, validation);
+        judge(model, candidate);
         trial.rmse_train = candidate.summary.rmse_train;
         trial.rmse_validation = candidate.summary.rmse_validation;
+        if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;
+        if (candidate.summary.likelihood) trial.likelihood_validation = candidate.summary.likelihood->validation;
         double n_eff = 0.0;
         for (const std::vector<double>& r : candidate.validation_residual) n_eff += effective_samples(r, span_lag);
         const FTest test = validation_f_test(sum_of_squares(current.validation_residual),
@@ -437,6 +515,11 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     std::vector<CandidateTrial> trials;
     std::vector<std::optional<State>> fitted;
     const double rmse_before = current.summary.rmse_validation;
+    // What users fly with, before this step: the velocity a step must lower, or the likelihood it must raise.
+    const std::optional<double> velocity_before =
+        current.summary.velocity ? std::optional(current.summary.velocity->validation.horizontal) : std::nullopt;
+    const std::optional<double> likelihood_before =
+        current.summary.likelihood ? std::optional(current.summary.likelihood->validation) : std::nullopt;
     std::size_t tried = 0;
     double level = options.significance;
     // Fits `untried` on every core at once, kept in library order so that the outcome does not depend on which
@@ -467,10 +550,26 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         if (!t.skipped.empty()) continue;
         const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
         const bool passes_f_test = t.p_value < level;
-        t.significant = improves && passes_f_test;
+        // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
+        const bool flies_better =
+            judged_by_velocity
+                ? !(velocity_before && t.velocity_validation) || *t.velocity_validation < *velocity_before
+                : !(likelihood_before && t.likelihood_validation) || *t.likelihood_validation > *likelihood_before;
+        t.significant = improves && passes_f_test && flies_better;
         char why[260];
         t.rejected_by.clear();
-        if (!improves) {
+        if (improves && passes_f_test && !flies_better && judged_by_velocity) {
+          std::snprintf(why, sizeof why,
+                        "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must lower it)",
+                        *velocity_before, *t.velocity_validation);
+          t.rejected_by = why;
+        } else if (improves && passes_f_test && !flies_better) {
+          std::snprintf(why, sizeof why,
+                        "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
+                        "must raise it)",
+                        *likelihood_before, *t.likelihood_validation);
+          t.rejected_by = why;
+        } else if (!improves) {
           std::snprintf(why, sizeof why, "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
                         100.0 * (t.rmse_validation / rmse_before - 1.0), 100.0 * options.min_improvement);
           t.rejected_by = why;
@@ -516,8 +615,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     s.with = trials[order.front()].with;
     s.rmse_train_before = current.summary.rmse_train;
     s.rmse_validation_before = rmse_before;
-    current = std::move(*fitted[order.front()]);
-    judge(Model(signals, setup, current.effects), current);
+    current = std::move(*fitted[order.front()]);  // judged when it was tried
     s.fit = current.summary;
     s.params = current.summary.effect_params.back();
     s.candidates = std::move(sorted);
@@ -528,6 +626,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
 
   out.final = current.summary;
   out.final_params = current.params;
+  out.final_params.conditions_flight = estimator::flight_identity(series);
   out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
   out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
                                    [](const ResidualAnalysis& a) { return a.white; });

@@ -26,7 +26,8 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 void check(const DragVelocityConfig& c) {
   const bool positive = c.max_gap > 0.0 && c.accel_noise > 0.0 && c.accel_process_noise > 0.0 && c.gyro_noise > 0.0 &&
                         c.gyro_bias_walk > 0.0 && c.initial_velocity_std > 0.0 && c.initial_tilt_std > 0.0 &&
-                        c.initial_gyro_bias_std > 0.0 && c.max_specific_force > 0.0 && c.max_rate > 0.0;
+                        c.initial_gyro_bias_std > 0.0 && c.max_specific_force > 0.0 && c.max_rate > 0.0 &&
+                        c.accel_offset_std >= 0.0 && c.rest_speed_std > 0.0;
   if (!positive) throw std::invalid_argument("DragVelocityEstimator: config times, noises and limits must be positive");
 }
 
@@ -36,6 +37,7 @@ bool finite(const ImuSample& s) { return std::isfinite(s.t) && s.gyro.allFinite(
 
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base) {
   if (params.identification.process_noise > 0.0) base.accel_process_noise = params.identification.process_noise;
+  if (params.transferred) base.accel_offset_std = std::max(base.accel_offset_std, kTransferredOffsetStd);
   const auto& rmse = params.identification.rmse;
   // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).
   for (const char* model : {"full", "paper"}) {
@@ -161,6 +163,8 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     const double wind_now = windy_ ? wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt) : 0.0;
     out.prior_air_velocity[axis] = x_[axis] - wind_now;
     out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
+    const double prior_slope = drag_slope(k, mu, out.prior_air_velocity[axis]);
+    out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
     if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
       out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
       continue;
@@ -175,8 +179,13 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     } else {
       fuse_velocity(axis, v_raw);
     }
-    out.v[axis] = x_[axis];
-    out.v_var[axis] = p_(axis, axis);
+    // The filter's velocity carries, beside its own variance, the offset's: offset / slope, constant through the
+    // flight. Weighed against rest (a Gaussian prior of std rest_speed_std), the product of the two is the output.
+    const double offset = config_.accel_offset_std / std::max(drag_slope(k, mu, x_[axis]), 1e-9);
+    const double known = p_(axis, axis) + offset * offset;
+    const double rest = config_.rest_speed_std * config_.rest_speed_std;
+    out.v[axis] = x_[axis] * rest / (rest + known);
+    out.v_var[axis] = known * rest / (rest + known);
   }
   out.gyro_bias = x_.tail<2>();
   ++counters_.estimates_out;

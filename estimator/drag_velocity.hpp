@@ -27,6 +27,15 @@ struct DragVelocityConfig {
   double initial_velocity_std = 1.0;    // m/s
   double initial_tilt_std = 0.1;        // of the body x, y components of the gravity direction (~rad)
   double initial_gyro_bias_std = 0.02;  // rad/s
+  // Never inventing a speed (docs/estimator.md, "Honest variance, and rest"). A constant offset of the horizontal
+  // specific force (the accelerometer's zero-g offset on a flight the calibration was not fitted on) reads as a
+  // velocity offset / slope that no run of white noise averages away; its std. 0 on the flight the model was fitted
+  // on, where the fit placed the offset; config_for sets kTransferredOffsetStd on any other.
+  double accel_offset_std = 0.0;  // m/s^2
+  // What is known of a multirotor's speed before any measurement: within a brisk 5 m/s (plausibility.hpp's
+  // kBriskSpeed). The output is the filter's velocity weighed against it: where the drag's slope is too weak for the
+  // offset above to be small, the estimate relaxes towards rest and its variance says how little is known.
+  double rest_speed_std = 5.0;  // m/s
   // Beyond any MEMS full scale: a sample outside is corrupt, and one would wreck the filter's state.
   double max_specific_force = 16.0 * kGravity;  // m/s^2, per axis
   double max_rate = 35.0;                       // rad/s (2000 deg/s), per axis
@@ -39,6 +48,9 @@ struct DragVelocityConfig {
 // not make the filter overconfident. Parameters without an identification keep `base`. A process noise the
 // identification fitted (the filter error method) replaces base's.
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base = {});
+// A consumer MEMS accelerometer's zero-g offset (0.02-0.06 g): what a calibration carried to another flight does not
+// know of that flight's, m/s^2.
+inline constexpr double kTransferredOffsetStd = 0.3;
 
 struct DragVelocityEstimate {
   double t = 0.0;                                       // s: the sample this describes, delay_samples() back
@@ -46,14 +58,20 @@ struct DragVelocityEstimate {
   Eigen::Vector2d f_var = Eigen::Vector2d::Zero();      // its variance, (m/s^2)^2
   Eigen::Vector2d v_raw = Eigen::Vector2d::Zero();      // the drag law inverted, sample by sample, m/s
   Eigen::Vector2d v_raw_var = Eigen::Vector2d::Zero();  // (m/s)^2
-  Eigen::Vector2d v = Eigen::Vector2d::Zero();          // filtered body-frame horizontal velocity, m/s
-  Eigen::Vector2d v_var = Eigen::Vector2d::Zero();      // (m/s)^2
+  // Filtered body-frame horizontal velocity, m/s, weighed against rest (accel_offset_std, rest_speed_std), and its
+  // variance, which counts the offset's share: the error it reports is the error it has.
+  Eigen::Vector2d v = Eigen::Vector2d::Zero();
+  Eigen::Vector2d v_var = Eigen::Vector2d::Zero();  // (m/s)^2
   Eigen::Vector2d gyro_bias = Eigen::Vector2d::Zero();  // estimated body x, y gyro bias, rad/s
   // The one-step prediction, per axis just before that axis's measurement is fused (x first, then y): the body-axis
   // air velocity the drag law saw (m/s), and the innovation f - drag(it) (m/s^2). The filter error method
   // (docs/identification.md) fits the model by these; an axis without drag predicts no force.
   Eigen::Vector2d prior_air_velocity = Eigen::Vector2d::Zero();
   Eigen::Vector2d innovation = Eigen::Vector2d::Zero();
+  // The innovation's variance as the filter predicts it, (m/s^2)^2: the law's slope squared times the prior velocity's
+  // variance plus the measurement noise (the noise alone on an axis without drag). With the innovation it gives the
+  // filter's likelihood of the measurements (filter_log_likelihood), by which an IMU-only model is judged.
+  Eigen::Vector2d innovation_var = Eigen::Vector2d::Zero();
 };
 
 struct DragVelocityCounters {

@@ -243,6 +243,17 @@ Windows resolve_windows(std::span<const double> t, const std::optional<TimeWindo
   return {clip(train_window, t, "training"), clip(validate_window, t, "validation")};
 }
 
+void require_trainable(const TimeWindow& train) {
+  const double length = train.end - train.start;
+  if (length >= kMinTrainSeconds) return;
+  char text[240];
+  std::snprintf(text, sizeof text,
+                "the training window %.2f:%.2f s holds %.1f s of data; identifying the drag needs at least %g s (a "
+                "multirotor's velocity answers a tilt within about 3/k): give a longer --train",
+                train.start, train.end, length, kMinTrainSeconds);
+  throw std::invalid_argument(text);
+}
+
 std::vector<Eigen::Vector3d> smoothed_derivative(std::span<const double> t, std::span<const Eigen::Vector3d> x,
                                                  double half_window) {
   return cubic_slope(t, x, half_window);
@@ -339,6 +350,7 @@ IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
   if (o.model == ModelKind::full && std::all_of(o.hold.blocks.begin(), o.hold.blocks.end(), [](bool h) { return h; }))
     throw std::invalid_argument("every block of the 3-D model is held: nothing to identify");
   const Windows windows = resolve_windows(series.t, o.train, o.validate);
+  require_trainable(windows.train);
   IdentifyResult result;
   Identification& id = result.params.identification;
   id.method = name(o.method);
@@ -357,6 +369,7 @@ IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
     const auto samples = prepare_full(series, o.velocity, o.derivative_half_window);
     result.fits.push_back(identify_full(samples, windows, o, result.params.full, id));
   }
+  result.params.conditions_flight = flight_identity(series);
   return result;
 }
 
@@ -383,6 +396,7 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
 
   struct Sums {
     VelocityErrorSum filter, inversion, eq12, zero;
+    double nees = 0.0;
   };
   std::vector<Sums> sums(windows.size());
   for (std::size_t k = 0; k < series.size(); ++k) {
@@ -398,6 +412,7 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
       sums[w].inversion.add(e->v_raw - v);
       sums[w].eq12.add(open_loop[i].head<2>() - v);
       sums[w].zero.add(-v);
+      sums[w].nees += (e->v - v).cwiseAbs2().cwiseQuotient(e->v_var).sum();
       ++out[w].samples;
     }
   }
@@ -407,6 +422,7 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
     out[w].inversion = sums[w].inversion.rmse();
     out[w].eq12 = sums[w].eq12.rmse();
     out[w].zero = sums[w].zero.rmse();
+    out[w].nees = sums[w].nees / static_cast<double>(out[w].samples);
     out[w].counters = estimator.counters();
   }
   return out;

@@ -58,6 +58,11 @@ struct Windows {
 Windows resolve_windows(std::span<const double> t, const std::optional<TimeWindow>& train,
                         const std::optional<TimeWindow>& validate);
 
+// A multirotor's velocity answers a tilt within about 3/k, 10 s at a typical k = 0.3 1/s: a training window shorter
+// than that cannot tell the drag from the rest of the model. Throws std::invalid_argument giving the window's length.
+inline constexpr double kMinTrainSeconds = 10.0;
+void require_trainable(const TimeWindow& train);
+
 // The samples with window.start <= t < window.end (samples are in time order).
 template <typename Sample>
 std::span<const Sample> select(const std::vector<Sample>& samples, const TimeWindow& window) {
@@ -153,6 +158,10 @@ struct VelocityEvaluation {
   VelocityError inversion;  // the drag law inverted sample by sample (the filter's measurement)
   VelocityError eq12;       // open-loop integration: dead_reckon(), eq. (12)'s 3-D generalisation
   VelocityError zero;       // "not moving": the reference's own RMS speed
+  // Whether the filter's variance is honest: the mean over scored samples of its normalised error squared,
+  // sum over x, y of (v - v_ref)^2 / v_var. A filter whose variance says what its error is gives 2 (the axes); more
+  // means it claims more certainty than it has.
+  double nees = 0.0;
   DragVelocityCounters counters;
 };
 

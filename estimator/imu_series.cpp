@@ -1,6 +1,10 @@
 #include "estimator/imu_series.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <stdexcept>
 
 namespace imubridge::estimator {
@@ -28,6 +32,24 @@ std::optional<std::string> validate(const ImuSeries& s) {
 
 void require_valid(const ImuSeries& series) {
   if (auto error = validate(series)) throw std::invalid_argument("ImuSeries: " + *error);
+}
+
+std::string flight_identity(const ImuSeries& series) {
+  // FNV-1a over the bytes of the first samples: enough to tell flights apart, the same wherever they are read.
+  constexpr std::size_t kSamples = 512;
+  std::uint64_t hash = 14695981039346656037ull;
+  const auto mix = [&](double value) {
+    unsigned char bytes[sizeof value];
+    std::memcpy(bytes, &value, sizeof value);
+    for (unsigned char b : bytes) hash = (hash ^ b) * 1099511628211ull;
+  };
+  for (std::size_t k = 0; k < std::min(series.size(), kSamples); ++k) {
+    mix(series.t[k]);
+    for (int i = 0; i < 3; ++i) mix(series.gyro[k][i]), mix(series.accel[k][i]);
+  }
+  char text[24];
+  std::snprintf(text, sizeof text, "imu:%016llx", static_cast<unsigned long long>(hash));
+  return text;
 }
 
 }  // namespace imubridge::estimator

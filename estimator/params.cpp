@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -32,7 +33,11 @@ constexpr std::string_view kVibrationRefusal =
     "noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with --lowpass or "
     "--ignore-band";
 
-constexpr std::array<std::string_view, 5> kTopKeys = {"version", "paper", "full", "identification", "effects"};
+constexpr std::array<std::string_view, 6> kTopKeys = {"version", "paper",   "full",
+                                                      "conditions", "effects", "identification"};
+// The flight's conditions (params.hpp): written in "conditions", still read from "full" in files written before.
+constexpr std::array<std::string_view, 7> kConditionKeys = {
+    "flight", "transferred", "wind", "wind_heading", "wind_heading_deg", "accel_bias", "gyro_bias"};
 constexpr std::array<std::string_view, 2> kPaperKeys = {"x", "y"};
 constexpr std::array<std::string_view, 6> kPaperAxisKeys = {"r", "beta", "beta_deg", "alpha", "alpha_deg", "mu"};
 constexpr std::array<std::string_view, 13> kFullKeys = {
@@ -217,6 +222,19 @@ FullModelParams read_full(const json& j, const std::string& path) {
   return p;
 }
 
+// The conditions object over `p`'s, and the flight they belong to.
+void read_conditions(const json& j, const std::string& path, FullModelParams& p, std::string& flight,
+                     bool& transferred) {
+  check_object(j, path, kConditionKeys);
+  if (j.contains("flight")) flight = get<std::string>(j.at("flight"), join(path, "flight"), "a string");
+  if (j.contains("transferred")) transferred = get<bool>(j.at("transferred"), join(path, "transferred"), "true or false");
+  if (j.contains("wind")) p.wind = vector<2>(j.at("wind"), join(path, "wind"));
+  p.wind_heading = angle_at(j, path, "wind_heading", p.wind_heading, number);
+  if (j.contains("accel_bias")) p.accel_bias = vector<3>(j.at("accel_bias"), join(path, "accel_bias"));
+  if (j.contains("gyro_bias")) p.gyro_bias = vector<3>(j.at("gyro_bias"), join(path, "gyro_bias"));
+  throw_if_invalid(p, path);
+}
+
 Identification read_identification(const json& j, const std::string& path) {
   check_object(j, path, kIdentificationKeys);
   Identification id;
@@ -261,6 +279,36 @@ std::optional<std::string> live_effect_refusal(std::string_view effect) {
   return message + " (diagnose's effects: " + listing(kEffects) + ")";
 }
 
+std::string describe_conditions(const FullModelParams& p) {
+  std::string out;
+  const auto add = [&](const char* what, double size, const char* unit) {
+    if (size == 0.0) return;
+    char text[96];
+    std::snprintf(text, sizeof text, "%s%s %.3g %s", out.empty() ? "" : ", ", what, size, unit);
+    out += text;
+  };
+  add("wind", p.wind.norm(), "m/s");
+  add("accelerometer bias", p.accel_bias.norm(), "m/s^2");
+  add("gyro bias", p.gyro_bias.norm(), "rad/s");
+  return out;
+}
+
+ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left) {
+  if (params.conditions_flight.empty() || params.conditions_flight == flight) return params;
+  ModelParams out = params;
+  out.transferred = true;
+  const std::string conditions = describe_conditions(params.full);
+  out.full.wind.setZero();
+  out.full.wind_heading = 0.0;
+  out.full.accel_bias.setZero();
+  out.full.gyro_bias.setZero();
+  if (left != nullptr && !conditions.empty()) {
+    *left = "the conditions of the flight these parameters were fitted on (" + params.conditions_flight + ": " +
+            conditions + ") are left behind; this flight starts from the vehicle's calibration alone";
+  }
+  return out;
+}
+
 void to_json(json& j, const PaperAxisParams& p) {
   j = json{{"r", p.r},
            {"beta", p.beta},
@@ -278,14 +326,9 @@ void to_json(json& j, const FullModelParams& p) {
            {"mounting_deg", to_array<3>(p.mounting * kDegPerRad)},
            {"drag_linear", to_array(p.drag_linear)},
            {"drag_quadratic", to_array(p.drag_quadratic)},
-           {"accel_bias", to_array(p.accel_bias)},
            {"accel_scale", to_array(p.accel_scale)},
            {"accel_cross", to_rows(p.accel_cross)},
-           {"gyro_bias", to_array(p.gyro_bias)},
-           {"time_offset", p.time_offset},
-           {"wind", to_array(p.wind)},
-           {"wind_heading", p.wind_heading},
-           {"wind_heading_deg", p.wind_heading * kDegPerRad}};
+           {"time_offset", p.time_offset}};
 }
 
 void from_json(const json& j, FullModelParams& p) { p = read_full(j, "full"); }
@@ -303,9 +346,18 @@ void to_json(json& j, const Identification& id) {
 void from_json(const json& j, Identification& id) { id = read_identification(j, "identification"); }
 
 void to_json(json& j, const ModelParams& p) {
+  const FullModelParams& f = p.full;
   j = json{{"version", kParamsVersion},
            {"paper", {{"x", p.paper_x}, {"y", p.paper_y}}},
-           {"full", p.full},
+           {"full", f},
+           {"conditions",
+            {{"flight", p.conditions_flight},
+             {"transferred", p.transferred},
+             {"wind", to_array(f.wind)},
+             {"wind_heading", f.wind_heading},
+             {"wind_heading_deg", f.wind_heading * kDegPerRad},
+             {"accel_bias", to_array(f.accel_bias)},
+             {"gyro_bias", to_array(f.gyro_bias)}}},
            {"effects", p.effects},
            {"identification", p.identification}};
 }
@@ -326,6 +378,7 @@ void from_json(const json& j, ModelParams& p) {
     if (paper.contains("y")) p.paper_y = read_paper_axis(paper.at("y"), "paper.y");
   }
   if (j.contains("full")) p.full = read_full(j.at("full"), "full");
+  if (j.contains("conditions")) read_conditions(j.at("conditions"), "conditions", p.full, p.conditions_flight, p.transferred);
   if (j.contains("effects")) p.effects = read_effects(j.at("effects"), "effects");
   if (j.contains("identification")) p.identification = read_identification(j.at("identification"), "identification");
 }

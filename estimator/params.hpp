@@ -40,10 +40,23 @@ struct Identification {
   friend bool operator==(const Identification&, const Identification&) = default;
 };
 
+// PARAMS.json keeps apart what belongs to the vehicle from what belongs to one flight (docs/identification.md,
+// "Calibration and conditions"). The vehicle's calibration transfers to its next flight: lever arm, mounting, drag,
+// accelerometer scale and cross-coupling, and the accelerometer-gyro time offset (the device's own filters). The
+// conditions of the flight it was fitted on do not: the wind, and the accelerometer and gyro biases (they change
+// from one power-up to the next; the live filter tracks the gyro's). They sit in FullModelParams beside the rest,
+// as the estimator runs them, and in PARAMS.json's "conditions" object with the flight they were fitted on.
 struct ModelParams {
   PaperAxisParams paper_x;  // pitch: the paper's x-axis model
   PaperAxisParams paper_y;  // roll: the same model about x_b (paper_model.hpp has the sign mapping)
   FullModelParams full;
+  // The flight the conditions in `full` were fitted on (estimator::flight_identity); empty: not recorded (a file
+  // written before conditions were kept apart, or edited by hand), and they are then taken as they are.
+  std::string conditions_flight;
+  // Flown on a flight other than conditions_flight (for_flight): that flight's accelerometer offset is unknown, and the
+  // filter says so in its variance (config_for, kTransferredOffsetStd). Written with the run's parameters, so a replay
+  // estimates as the live run did.
+  bool transferred = false;
   // The names of diagnose's effects the model includes, in the order diagnose added them (docs/effects.md). Every
   // one must be an effect the live estimator runs (live_effect_refusal()).
   std::vector<std::string> effects;
@@ -51,6 +64,15 @@ struct ModelParams {
 
   friend bool operator==(const ModelParams&, const ModelParams&) = default;
 };
+
+// The conditions `params` hold, in a line a person reads ("wind 3.1 m/s, accelerometer bias 0.21 m/s^2"); empty when
+// there are none.
+std::string describe_conditions(const FullModelParams& params);
+// The parameters to fly `flight` with (a flight_identity, or empty for a live flight no store has yet): unchanged
+// when their conditions were fitted on that flight or name none; else the vehicle's calibration alone, and `left`
+// (when given) says which conditions were left behind. A calibration from Monday does not fly Tuesday with Monday's
+// wind.
+ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left = nullptr);
 
 // Why the live drag-velocity estimator cannot run diagnose's effect `effect`, or nullopt when it runs it. An unknown
 // name is refused with the nearest known one ("did you mean"); `vibration` is refused with the reason.

@@ -19,6 +19,8 @@ constexpr LimitEntry kLimits[] = {
     {"accel_scale", &PlausibilityLimits::accel_scale, ""}, {"accel_cross", &PlausibilityLimits::accel_cross, ""},
     {"gyro_bias", &PlausibilityLimits::gyro_bias, "rad/s"}, {"accel_bias", &PlausibilityLimits::accel_bias, "m/s^2"},
     {"time_offset", &PlausibilityLimits::time_offset, "s"},
+    {"drag_linear", &PlausibilityLimits::drag_linear, "1/s"},
+    {"drag_quadratic", &PlausibilityLimits::drag_quadratic, "1/m"},
 };
 
 const LimitEntry& entry(const char* name) {
@@ -74,6 +76,11 @@ std::vector<Implausibility> check_plausibility(const FullModelParams& p, const P
     }
   }
   check(out, limits, "time_offset", "accelerometer-gyro time offset", p.time_offset);
+  for (int i = 0; i < 2; ++i) {
+    const std::string axis = kAxis[i];
+    check(out, limits, "drag_linear", ("linear drag k." + axis).c_str(), p.drag_linear[i]);
+    check(out, limits, "drag_quadratic", ("quadratic drag mu." + axis).c_str(), p.drag_quadratic[i]);
+  }
   return out;
 }
 

@@ -27,6 +27,11 @@ struct PlausibilityLimits {
   double accel_bias = 1.0;
   // |time offset| between accelerometer and gyro, s: one device's filters and buses delay by milliseconds to tens.
   double time_offset = 0.1;
+  // Drag at kBriskSpeed beyond g: holding that speed would need a tilt past 45 degrees, where multirotors do not cruise
+  // (their attitude limits are 30-45 degrees). k = g / kBriskSpeed (1/s) and mu = g / kBriskSpeed^2 (1/m) alone each
+  // give g there.
+  double drag_linear = 2.0;      // k per axis, 1/s
+  double drag_quadratic = 0.4;   // mu per axis, 1/m
 };
 
 // One limit the values exceed, in a line a person reads: "wind 31.2 m/s exceeds its limit 20 m/s (--limit wind=...)".

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "estimator/drag_velocity.hpp"
 #include "estimator/lever_arm_compensation.hpp"
 #include "estimator/velocity.hpp"
 
@@ -51,6 +52,28 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
     zero.note = std::string("no velocity from this model (") + e.what() + "); scored as zero velocity";
     return zero;
   }
+}
+
+FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParams& params, const Windows& windows) {
+  DragVelocityEstimator estimator(params.full, config_for(params));
+  const TimeWindow* both[] = {&windows.train, &windows.validate};
+  double sums[2] = {0.0, 0.0};
+  std::size_t counts[2] = {0, 0};
+  constexpr double kLog2Pi = 1.8378770664093453;
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    const std::optional<DragVelocityEstimate> e = estimator.update(series.sample(k));
+    if (!e) continue;
+    for (int w = 0; w < 2; ++w) {
+      if (!inside(e->t, *both[w])) continue;
+      for (int axis = 0; axis < 2; ++axis) {
+        const double s = e->innovation_var[axis], nu = e->innovation[axis];
+        sums[w] += -0.5 * (nu * nu / s + std::log(s) + kLog2Pi);
+        ++counts[w];
+      }
+    }
+  }
+  if (counts[0] == 0 || counts[1] == 0) throw std::invalid_argument("the filter gave no estimate inside a window");
+  return {sums[0] / static_cast<double>(counts[0]), sums[1] / static_cast<double>(counts[1])};
 }
 
 LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& windows) {

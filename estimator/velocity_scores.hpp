@@ -22,6 +22,17 @@ struct VelocityScores {
 std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
                                              const Windows& windows);
 
+// How well the drag-velocity filter run with a model predicts the accelerometer: the mean, over the samples of a
+// window and both horizontal axes, of the Gaussian log-density of each innovation under the variance the filter gives
+// it, -0.5 (nu^2 / S + log(2 pi S)). Needs no reference: without one, it is what an IMU-only model is judged by
+// (docs/effects.md, "The rules"), as the velocity is with one. The filter's settings follow the parameters
+// (config_for), as in run and replay.
+struct FilterLikelihood {
+  double train = 0.0, validation = 0.0;  // per measurement, nats
+};
+// Throws std::invalid_argument for parameters the estimator refuses or a window without estimates.
+FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParams& params, const Windows& windows);
+
 // "Not moving": the reference's own RMS horizontal speed on each window, in the body frame `mounting` defines.
 VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector3d& mounting, const Windows& windows);
 

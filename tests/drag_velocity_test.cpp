@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -264,6 +265,32 @@ TEST(DragVelocityEstimator, BeatsTheRawInversionAndStaysUnbiasedWithABiasedGyro)
   const ErrorStats late = errors(r, flight, 60.0, 90.0, false);
   EXPECT_LT(late.rms.maxCoeff(), 1.5 * early.rms.maxCoeff());
   EXPECT_LT((r.estimates.back().gyro_bias - flight.gyro_bias_body).norm(), 0.1 * flight.gyro_bias_body.norm());
+}
+
+TEST(DragVelocityEstimator, WhereTheDragIsTooWeakToReadItRelaxesTowardsRestInsteadOfInventingASpeed) {
+  // A vehicle at rest, level, whose accelerometer reads a zero-g offset of 0.3 m/s^2 no fit of this flight placed
+  // (a calibration from another flight), with a drag so weak (k = 0.02 1/s) that the offset reads as 15 m/s.
+  FullModelParams weak;
+  weak.drag_linear = {0.02, 0.02};
+  const auto final_estimate = [&](const DragVelocityConfig& config) {
+    DragVelocityEstimator estimator(weak, config);
+    std::optional<DragVelocityEstimate> last;
+    for (int k = 0; k < 200 * 60; ++k) {
+      if (auto e = estimator.update({k / 200.0, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.3, 0.0, -kGravity)}))
+        last = e;
+    }
+    return *last;
+  };
+  DragVelocityConfig blind;  // the offset's share of the error not counted: the mechanism off
+  const DragVelocityEstimate invented = final_estimate(blind);
+  EXPECT_LT(invented.v.x(), -10.0);                        // it flies 10+ m/s backwards, sure of it
+  EXPECT_LT(invented.v_var.x(), invented.v.x() * invented.v.x() / 100.0);
+  DragVelocityConfig told;
+  told.accel_offset_std = kTransferredOffsetStd;
+  const DragVelocityEstimate honest = final_estimate(told);
+  EXPECT_GT(honest.v.x(), -2.0);                           // relaxed towards rest ...
+  EXPECT_GT(4.0 * honest.v_var.x(), honest.v.x() * honest.v.x());  // ... and its variance covers what is left
+  EXPECT_GT(std::sqrt(honest.v_var.x()), 3.0);             // it says how little it knows
 }
 
 TEST(DragVelocityEstimator, CompensatedForceIsTheDrag) {

@@ -6,6 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include "estimator/params.hpp"
+
+#include "estimator/drag_velocity.hpp"
 #include "tests/temp_dir.hpp"
 
 namespace imubridge::estimator {
@@ -28,6 +30,7 @@ ModelParams identified() {
   p.full.time_offset = -0.012;
   p.full.wind = {2.5, -1.25};
   p.full.wind_heading = 0.7;
+  p.conditions_flight = "imu:0123456789abcdef";
   p.effects = {"linear_drag", "wind", "accel_scale", "accel_cross", "gyro_bias", "time_offset"};
   p.identification = {.method = "ga+lm",
                       .seed = 42,
@@ -124,7 +127,7 @@ TEST(ModelParamsJson, RoundTripsEveryEffectField) {
   EXPECT_EQ(j["full"]["accel_cross"][0][1].get<double>(), 0.03);
   EXPECT_EQ(j["full"]["accel_cross"][1][0].get<double>(), 0.02);  // rows are the reading axis
   EXPECT_EQ(j["full"]["time_offset"].get<double>(), -0.012);
-  EXPECT_NEAR(j["full"]["wind_heading_deg"].get<double>(), 0.7 * 180.0 / kPi, 1e-12);
+  EXPECT_NEAR(j["conditions"]["wind_heading_deg"].get<double>(), 0.7 * 180.0 / kPi, 1e-12);
   EXPECT_EQ(j["effects"][1], "wind");
   const ModelParams back = j.get<ModelParams>();
   EXPECT_EQ(back.full.accel_scale, p.full.accel_scale);
@@ -139,15 +142,14 @@ TEST(ModelParamsJson, RoundTripsEveryEffectField) {
   EXPECT_NEAR(json::parse(R"({"full": {"wind_heading_deg": 90}})").get<ModelParams>().full.wind_heading, kPi / 2,
               1e-15);
   json edited = j;
-  edited["full"]["wind_heading_deg"] = 10.0;
+  edited["conditions"]["wind_heading_deg"] = 10.0;
   EXPECT_NE(read_error(edited).find("wind_heading"), std::string::npos);
 }
 
 TEST(ModelParamsJson, FilesWithoutTheEffectKeysReadWithTheDefaults) {
   json j = identified();
-  for (const char* key : {"accel_scale", "accel_cross", "gyro_bias", "time_offset", "wind", "wind_heading",
-                          "wind_heading_deg"})
-    j["full"].erase(key);
+  for (const char* key : {"accel_scale", "accel_cross", "time_offset"}) j["full"].erase(key);
+  j.erase("conditions");
   j.erase("effects");
   const ModelParams p = j.get<ModelParams>();
   EXPECT_EQ(p.full.accel_scale, Eigen::Vector3d::Zero());
@@ -156,8 +158,56 @@ TEST(ModelParamsJson, FilesWithoutTheEffectKeysReadWithTheDefaults) {
   EXPECT_EQ(p.full.time_offset, 0.0);
   EXPECT_EQ(p.full.wind, Eigen::Vector2d::Zero());
   EXPECT_EQ(p.full.wind_heading, 0.0);
+  EXPECT_EQ(p.conditions_flight, "");
   EXPECT_TRUE(p.effects.empty());
   EXPECT_EQ(p.full.drag_linear, identified().full.drag_linear);
+}
+
+TEST(ModelParamsJson, KeepsTheFlightsConditionsApartFromTheVehiclesCalibration) {
+  const json j = identified();
+  for (const char* key : {"wind", "wind_heading", "accel_bias", "gyro_bias"}) {
+    EXPECT_FALSE(j["full"].contains(key)) << key;
+    EXPECT_TRUE(j["conditions"].contains(key)) << key;
+  }
+  EXPECT_EQ(j["conditions"]["flight"], "imu:0123456789abcdef");
+  EXPECT_EQ(j["conditions"]["wind"][0].get<double>(), 2.5);
+  // A file written before conditions were kept apart holds them in "full", and still reads.
+  json old = j;
+  old.erase("conditions");
+  old["full"]["wind"] = {1.0, 2.0};
+  old["full"]["accel_bias"] = {0.1, 0.0, 0.0};
+  const ModelParams p = old.get<ModelParams>();
+  EXPECT_EQ(p.full.wind, Eigen::Vector2d(1.0, 2.0));
+  EXPECT_EQ(p.full.accel_bias, Eigen::Vector3d(0.1, 0.0, 0.0));
+  EXPECT_EQ(p.conditions_flight, "");
+}
+
+TEST(ModelParamsForFlight, AnotherFlightFliesTheVehiclesCalibrationWithoutTheFirstFlightsWind) {
+  const ModelParams p = identified();
+  std::string left;
+  const ModelParams other = for_flight(p, "imu:ffffffffffffffff", &left);
+  EXPECT_EQ(other.full.wind, Eigen::Vector2d::Zero());
+  EXPECT_TRUE(other.transferred);  // and its filter counts the unknown offset of this flight (config_for)
+  EXPECT_EQ(config_for(other).accel_offset_std, kTransferredOffsetStd);
+  EXPECT_EQ(config_for(p).accel_offset_std, 0.0);
+  EXPECT_EQ(other.full.accel_bias, Eigen::Vector3d::Zero());
+  EXPECT_EQ(other.full.gyro_bias, Eigen::Vector3d::Zero());
+  // The vehicle's calibration travels whole.
+  EXPECT_EQ(other.full.lever_arm, p.full.lever_arm);
+  EXPECT_EQ(other.full.mounting, p.full.mounting);
+  EXPECT_EQ(other.full.drag_linear, p.full.drag_linear);
+  EXPECT_EQ(other.full.drag_quadratic, p.full.drag_quadratic);
+  EXPECT_EQ(other.full.accel_scale, p.full.accel_scale);
+  EXPECT_EQ(other.full.accel_cross, p.full.accel_cross);
+  EXPECT_EQ(other.full.time_offset, p.full.time_offset);
+  EXPECT_NE(left.find("wind 2.8 m/s"), std::string::npos) << left;
+  // Its own flight keeps them; so does a live flight of parameters that name no flight (an old or edited file).
+  EXPECT_EQ(for_flight(p, p.conditions_flight), p);
+  ModelParams unnamed = p;
+  unnamed.conditions_flight.clear();
+  EXPECT_EQ(for_flight(unnamed, ""), unnamed);
+  // A live flight ("" : no store has it yet) is never the one the conditions were fitted on.
+  EXPECT_EQ(for_flight(p, "").full.wind, Eigen::Vector2d::Zero());
 }
 
 TEST(ModelParamsJson, UnknownKeysAreRefusedWithTheirPathAndTheNearestValidKey) {

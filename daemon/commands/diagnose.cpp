@@ -113,9 +113,57 @@ std::pair<double, double> parse_band(const std::string& text) {
   return {lo, hi};
 }
 
-void print_params(const std::vector<dg::ParameterEstimate>& params) {
-  for (const dg::ParameterEstimate& p : params)
-    std::printf("    %-16s %12.6g ± %-10.3g %s\n", p.name.c_str(), p.value, p.std_error, p.unit.c_str());
+void print_params(const std::vector<dg::ParameterEstimate>& params, const std::string& std_error_failure = "") {
+  bool unknown = false;
+  for (const dg::ParameterEstimate& p : params) {
+    if (std::isfinite(p.std_error)) {
+      std::printf("    %-16s %12.6g ± %-10.3g %s\n", p.name.c_str(), p.value, p.std_error, p.unit.c_str());
+    } else {
+      std::printf("    %-16s %12.6g ± %-10s %s\n", p.name.c_str(), p.value, "?", p.unit.c_str());
+      unknown = true;
+    }
+  }
+  if (unknown)
+    std::printf("    (? : no standard error: %s)\n",
+                std_error_failure.empty() ? "the covariance could not be computed" : std_error_failure.c_str());
+}
+
+// The final model exactly as PARAMS.json holds it (what run, replay and evaluate estimate with): the vehicle's
+// calibration, then the flight's conditions, each value with its standard error where the fit gave one.
+void print_final_model(const est::ModelParams& p) {
+  const auto& se = p.identification.std_errors;
+  const auto row = [&](const std::string& path, double value, const char* unit) {
+    const auto e = se.find(path);
+    if (e != se.end())
+      std::printf("    %-22s %12.6g ± %-10.3g %s\n", path.c_str(), value, e->second, unit);
+    else
+      std::printf("    %-22s %12.6g %-12s %s\n", path.c_str(), value, "(no s.e.)", unit);
+  };
+  const auto vector = [&](const std::string& block, const auto& v, const char* unit, bool skip_zero) {
+    if (skip_zero && v.isZero()) return;
+    for (int i = 0; i < static_cast<int>(v.size()); ++i) row("full." + block + "." + std::to_string(i), v[i], unit);
+  };
+  const est::FullModelParams& f = p.full;
+  std::printf("final model (as PARAMS.json holds it):\n  the vehicle's calibration:\n");
+  vector("lever_arm", f.lever_arm, "m", false);
+  vector("mounting", f.mounting, "rad", false);
+  vector("drag_linear", f.drag_linear, "1/s", false);
+  vector("drag_quadratic", f.drag_quadratic, "1/m", false);
+  vector("accel_scale", f.accel_scale, "", true);
+  if (!f.accel_cross.isZero()) {
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (i != j) row("full.accel_cross." + std::to_string(i) + std::to_string(j), f.accel_cross(i, j), "");
+  }
+  if (f.time_offset != 0.0) row("full.time_offset", f.time_offset, "s");
+  if (p.identification.process_noise > 0.0)
+    std::printf("    %-22s %12.6g %-12s %s\n", "process_noise", p.identification.process_noise, "", "m/s^2/sqrt(Hz)");
+  const std::string conditions = est::describe_conditions(f);
+  std::printf("  the conditions of this flight (%s), left behind on any other: %s\n", p.conditions_flight.c_str(),
+              conditions.empty() ? "none" : conditions.c_str());
+  vector("wind", f.wind, "m/s", true);
+  vector("accel_bias", f.accel_bias, "m/s^2", true);
+  vector("gyro_bias", f.gyro_bias, "rad/s", true);
 }
 
 void print_fit_flags(const dg::ModelFit& fit) {
@@ -136,7 +184,7 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   std::printf(", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(), d.train_start,
               d.train_end, d.validate_start, d.validate_end);
   std::printf("base: RMSE train %.4f, validation %.4f m/s^2\n", d.base.rmse_train, d.base.rmse_validation);
-  print_params(d.base.base_params);
+  print_params(d.base.base_params, d.base.std_error_failure);
   print_velocity(d.base);
   print_fit_flags(d.base);
   for (std::size_t i = 0; i < d.steps.size(); ++i) {
@@ -144,7 +192,7 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
     std::printf("step %zu: + %s: RMSE train %.4f -> %.4f, validation %.4f -> %.4f m/s^2\n", i + 1,
                 dg::with_needed(s.effect, s.with).c_str(), s.rmse_train_before, s.fit.rmse_train,
                 s.rmse_validation_before, s.fit.rmse_validation);
-    print_params(s.params);
+    print_params(s.params, s.fit.std_error_failure);
     print_velocity(s.fit);
     print_fit_flags(s.fit);
   }
@@ -156,12 +204,15 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
     else if (!best.skipped.empty())
       std::printf("stopped: no candidate could be tried (%s: %s)\n", best.effect.c_str(), best.skipped.c_str());
     for (const dg::CandidateTrial& c : d.last_candidates) {
-      if (c.skipped.rfind("implausible", 0) == 0)
+      if (c.skipped.rfind("implausible", 0) == 0 || c.skipped.rfind("undetermined", 0) == 0)
         std::printf("  refused %s: %s\n", c.effect.c_str(), c.skipped.c_str());
+      else if (c.rejected_by.rfind("velocity rule", 0) == 0 || c.rejected_by.rfind("likelihood rule", 0) == 0)
+        std::printf("  refused %s: %s\n", c.effect.c_str(), c.rejected_by.c_str());
     }
   } else if (!d.steps.empty()) {
     std::printf("stopped: the step limit (--max-steps) was reached\n");
   }
+  print_final_model(d.final_params);
   std::printf("summary: %s\n", dg::summary_line(d).c_str());
   std::printf("final residual %s\n", d.residual_white ? "white" : "NOT white");
   for (const dg::Unexplained& u : d.unexplained)

@@ -37,11 +37,13 @@ json to_json(const est::VelocityError& e) {
 }
 
 int run(const EvaluateCliOptions& o) {
-  const est::ModelParams params = est::load_params(o.params);
   const store::Store store(o.db, {.read_only = true});
   const pipeline::SessionSeries session = pipeline::read_session_series(
       store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes});
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  std::string left;
+  const est::ModelParams params = est::for_flight(est::load_params(o.params), est::flight_identity(session.series), &left);
+  if (!left.empty()) std::fprintf(stderr, "%s\n", left.c_str());
   const est::TimeWindow span = percent_span(session.series, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
@@ -57,6 +59,8 @@ int run(const EvaluateCliOptions& o) {
                       {"raw_inversion", to_json(e.inversion)},
                       {"eq12", to_json(e.eq12)},
                       {"zero", to_json(e.zero)}}},
+                    // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
+                    {"estimator_nees", e.nees},
                     {"estimator_counters",
                      {{"samples_in", c.samples_in},
                       {"estimates_out", c.estimates_out},

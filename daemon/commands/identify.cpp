@@ -195,10 +195,14 @@ int run(const IdentifyCliOptions& o) {
                                          ? diagnose::identify_by_filter_error(session.series, options)
                                          : est::identify(session.series, options);
 
-  est::save_params(o.out, result.params);
-  if (!result.fits.front().convergence.empty()) {
-    const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
-    write_convergence(curve, result.fits);
+  // Refused, not warned about: a model no airframe has flies worse than none (docs/identification.md, "Plausibility").
+  const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
+  if (implausible.empty()) {
+    est::save_params(o.out, result.params);
+    if (!result.fits.front().convergence.empty()) {
+      const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
+      write_convergence(curve, result.fits);
+    }
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
@@ -217,9 +221,15 @@ int run(const IdentifyCliOptions& o) {
     std::printf("zero velocity scores train %.3f, validation %.3f m/s (horizontal)\n", zero.train.horizontal,
                 zero.validation.horizontal);
   }
-  for (const est::Implausibility& i : est::check_plausibility(result.params.full, limits))
-    std::printf("warning: implausible: %s\n", i.message.c_str());
   for (const std::string& line : est::negligible_drag(result.params.full)) std::printf("warning: %s\n", line.c_str());
+  if (!implausible.empty()) {
+    for (const est::Implausibility& i : implausible) std::printf("refused: implausible: %s\n", i.message.c_str());
+    std::fprintf(stderr,
+                 "identify: the fit is refused and %s is not written: no airframe has these values (a window without "
+                 "the manoeuvres that determine them, or wrong --imu-axes, are the usual causes)\n",
+                 o.out.c_str());
+    return 1;
+  }
   return 0;
 }
 

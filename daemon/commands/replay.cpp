@@ -16,6 +16,7 @@
 #include "daemon/command.hpp"
 #include "daemon/pty.hpp"
 #include "estimator/params.hpp"
+#include "pipeline/session_series.hpp"
 #include "pipeline/session_config.hpp"
 #include "replay/replayer.hpp"
 #include "replay/session_lookup.hpp"
@@ -135,7 +136,15 @@ int replay_into_run(const ReplayCommandOptions& o) {
   store::Store store(o.db);
   const store::Session session = replay::find_session(store, o.session);
   replay::ReplayOptions options;
-  if (!o.params.empty()) options.params = estimator::parse_params(read_file(o.params), o.params);
+  if (!o.params.empty()) {
+    // The session's own flight keeps the conditions fitted on it; another flies the vehicle's calibration alone.
+    const pipeline::SessionSeries flight =
+        pipeline::read_session_series(store, o.session, {.link = o.link.empty() ? std::nullopt : std::optional(link_id(store, session, o.link))});
+    std::string left;
+    options.params = estimator::for_flight(estimator::parse_params(read_file(o.params), o.params),
+                                           estimator::flight_identity(flight.series), &left);
+    if (!left.empty()) std::fprintf(stderr, "%s\n", left.c_str());
+  }
   options.play = {.from_s = o.from_s, .to_s = o.to_s, .speed = parse_speed(o.speed.empty() ? "max" : o.speed)};
   if (!o.link.empty()) options.play.link = link_id(store, session, o.link);
   Progress progress(o.from_s.value_or(0), progress_end(store, session, o.to_s));

@@ -45,6 +45,9 @@ struct ModelSetup {
   // velocity `filter`: the filter's noises (the measurement noise set from the data: docs/identification.md).
   estimator::DragVelocityConfig filter{};
   std::size_t filter_block = 1;  // samples per block mean the filter runs on (identification_block)
+  // The base model's lever arm is searched within +-this per component, m (the paper's r within [0, this]);
+  // infinite unless a fit ran beyond the plausibility table (diagnose then refits the base inside it).
+  double lever_arm_bound = std::numeric_limits<double>::infinity();
 };
 
 // The stages an effect acts in. One declaration: the model calls only these stages' hooks, and reads from it which

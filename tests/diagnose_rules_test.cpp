@@ -1,0 +1,98 @@
+// The rules by which `imubridge diagnose` keeps a model (docs/effects.md, "Plausibility and bounds", "The
+// significance rule"): an implausible base is fitted again inside the plausibility table, not carried on; a training
+// window too short to tell the drag is refused with its length; every candidate is judged by what users fly with (the
+// velocity with a reference, the filter's likelihood from the IMU alone) and says so.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "diagnose/search.hpp"
+#include "estimator/imu_series.hpp"
+#include "sim/imu_series.hpp"
+#include "sim/scenario.hpp"
+#include "sim/simulator.hpp"
+
+namespace imubridge::diagnose {
+namespace {
+
+estimator::ImuSeries paper_flight(std::vector<std::string> effects = {}) {
+  return sim::imu_series(sim::simulate(sim::make_scenario("paper", 3, 50.0, effects)));
+}
+
+DiagnoseOptions options(VelocitySource velocity, int max_steps) {
+  DiagnoseOptions o;
+  o.model = ModelKind::full;
+  o.velocity = velocity;
+  o.train = estimator::TimeWindow{0.0, 30.0};
+  o.validate = estimator::TimeWindow{30.0, 50.0};
+  o.max_steps = max_steps;
+  return o;
+}
+
+TEST(DiagnoseRules, AnImplausibleBaseIsFittedAgainInsideThePlausibilityTable) {
+  // The simulated IMU sits 0.179 m from the mass centre; a table that allows 0.1 m makes the first fit implausible.
+  DiagnoseOptions o = options(VelocitySource::reference, 0);
+  o.limits.lever_arm = 0.1;
+  const Diagnosis d = run_diagnosis(paper_flight(), o);
+  EXPECT_TRUE(d.base.implausible.empty()) << d.base.implausible.front();
+  EXPECT_LE(d.final_params.full.lever_arm.norm(), 0.1 + 1e-9);
+  const bool said = std::any_of(d.warnings.begin(), d.warnings.end(), [](const std::string& w) {
+    return w.find("first fit was implausible") != std::string::npos && w.find("lever arm") != std::string::npos;
+  });
+  EXPECT_TRUE(said);
+  // With the table's own limit the same flight's base is plausible and nothing is refitted.
+  const Diagnosis plain = run_diagnosis(paper_flight(), options(VelocitySource::reference, 0));
+  EXPECT_NEAR(plain.final_params.full.lever_arm.norm(), 0.179, 0.01);
+  EXPECT_TRUE(plain.warnings.empty() || std::none_of(plain.warnings.begin(), plain.warnings.end(), [](const auto& w) {
+    return w.find("first fit was implausible") != std::string::npos;
+  }));
+}
+
+TEST(DiagnoseRules, ATrainingWindowTooShortToTellTheDragIsRefusedWithItsLength) {
+  DiagnoseOptions o = options(VelocitySource::reference, 1);
+  o.train = estimator::TimeWindow{0.0, 1.6};
+  try {
+    (void)run_diagnosis(paper_flight(), o);
+    FAIL() << "a 1.6-s training window was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("1.6 s"), std::string::npos) << e.what();
+  }
+}
+
+TEST(DiagnoseRules, EveryCandidateIsJudgedByTheVelocityWithAReference) {
+  const Diagnosis d = run_diagnosis(paper_flight(), options(VelocitySource::reference, 2));
+  ASSERT_FALSE(d.steps.empty());
+  double before = d.zero_velocity->validation.horizontal;
+  for (const Step& s : d.steps) {
+    // Each step kept lowered the velocity a user flies with.
+    ASSERT_TRUE(s.fit.velocity);
+    EXPECT_LT(s.fit.velocity->validation.horizontal, before) << s.effect;
+    before = s.fit.velocity->validation.horizontal;
+    for (const CandidateTrial& c : s.candidates) {
+      if (!c.skipped.empty()) continue;
+      EXPECT_TRUE(c.velocity_validation) << c.effect;
+      EXPECT_FALSE(c.likelihood_validation) << c.effect;
+    }
+  }
+}
+
+TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood) {
+  const Diagnosis d = run_diagnosis(paper_flight(), options(VelocitySource::filter, 1));
+  ASSERT_TRUE(d.base.likelihood);
+  ASSERT_FALSE(d.steps.empty());
+  const Step& s = d.steps.front();
+  ASSERT_TRUE(s.fit.likelihood);
+  EXPECT_GT(s.fit.likelihood->validation, d.base.likelihood->validation);
+  for (const CandidateTrial& c : s.candidates) {
+    if (!c.skipped.empty()) continue;
+    EXPECT_TRUE(c.likelihood_validation) << c.effect;
+    // A candidate that passes the residual's rules but lowers the likelihood is refused by the likelihood rule.
+    if (c.rejected_by.rfind("likelihood rule", 0) == 0) EXPECT_LE(*c.likelihood_validation, d.base.likelihood->validation);
+  }
+}
+
+}  // namespace
+}  // namespace imubridge::diagnose
