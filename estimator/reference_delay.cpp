@@ -194,7 +194,11 @@ ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const
     for (std::size_t k = 1; k + 1 < rho.size(); ++k) {
       const bool local_max = rho[k] >= rho[k - 1] && rho[k] >= rho[k + 1];
       const std::size_t distance = k > best ? k - best : best - k;
-      if (local_max && distance > away && rho[k] >= rho[best] - kDelayAmbiguity) {
+      // A peak of its own: the correlation dips between the two by more than the ambiguity (else a bump on the
+      // best peak's broad flank).
+      const double dip = *std::min_element(rho.begin() + static_cast<long>(std::min(k, best)),
+                                           rho.begin() + static_cast<long>(std::max(k, best)) + 1);
+      if (local_max && distance > away && rho[k] >= rho[best] - kDelayAmbiguity && rho[k] - dip > kDelayAmbiguity) {
         out.unusable = format("two lags match nearly as well, %.3f and %.3f s", lag_of_best,
                               (static_cast<double>(k) - half) * kDelayLagStep);
         break;

@@ -32,7 +32,8 @@ inline constexpr double kMinDelayCorrelation = 0.5;
 // Below this horizontal acceleration (RMS about its mean, m/s^2, the reference's) the vehicle hardly manoeuvres:
 // half a degree of attitude error alone is 0.09 m/s^2, so a peak would say nothing about time.
 inline constexpr double kMinDelayAcceleration = 0.15;
-// Another local maximum of the correlation within this of the best one: periodic manoeuvres, the lag is ambiguous.
+// Another peak of the correlation within this of the best one, with a dip of more than this between them: periodic
+// manoeuvres, the lag is ambiguous.
 inline constexpr double kDelayAmbiguity = 0.05;
 // Fewer boxes than this (a few seconds of data) is too little to estimate from.
 inline constexpr std::size_t kMinDelayBoxes = 20;
