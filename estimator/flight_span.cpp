@@ -65,6 +65,23 @@ std::optional<FlightSpan> detect_flight(const ImuSeries& s) {
   return out;
 }
 
+std::optional<FlightSpan> flight_from_land_detector(std::span<const TimeWindow> airborne, const TimeWindow& data) {
+  std::optional<FlightSpan> out;
+  for (const TimeWindow& w : airborne) {
+    const TimeWindow clipped{std::max(w.start, data.start), std::min(w.end, data.end)};
+    if (!(clipped.end > clipped.start)) continue;
+    if (out && clipped.end - clipped.start <= out->window.end - out->window.start) continue;
+    out.emplace();
+    out->window = clipped;
+  }
+  if (!out) return out;
+  char text[200];
+  std::snprintf(text, sizeof text, "in flight %.3f:%.3f s (the log's land detector: its takeoff and landing%s)",
+                out->window.start, out->window.end, airborne.size() > 1 ? ", the longest of its flights" : "");
+  out->description = text;
+  return out;
+}
+
 std::optional<double> share_in_flight(const TimeWindow& window, const TimeWindow& flight, const TimeWindow& data) {
   const double start = std::max(window.start, data.start), end = std::min(window.end, data.end);
   if (!(end > start)) return std::nullopt;

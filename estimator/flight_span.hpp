@@ -4,6 +4,7 @@
 // "Windows"). Users' recordings start and end on the ground, by hand, or on a bench; a model is identified and judged
 // on the flight.
 #include <optional>
+#include <span>
 #include <string>
 
 #include "estimator/imu_series.hpp"
@@ -26,6 +27,11 @@ struct FlightSpan {
 inline constexpr double kFlightBlockSeconds = 0.5;
 inline constexpr double kMinFlightContrast = 4.0;
 std::optional<FlightSpan> detect_flight(const ImuSeries& series);
+
+// The flight by the log's own land detector (`airborne`: its takeoff-to-landing intervals, an open end infinite):
+// the longest one clipped to `data`, said as such; nullopt when none lies in the data. A land detector knows when
+// the vehicle left the ground; the vibration only suggests it.
+std::optional<FlightSpan> flight_from_land_detector(std::span<const TimeWindow> airborne, const TimeWindow& data);
 
 // The share of `window`, clipped to the data's span, that lies in `flight` (0 to 1); nullopt when the clipped window
 // is empty. A fit window mostly on the ground identifies nothing a flight model has.

@@ -223,6 +223,8 @@ TimeWindow parse_window(std::string_view text, const TimeWindow& span) {
   };
   const std::size_t colon = text.find(':');
   TimeWindow w{0.0, std::numeric_limits<double>::infinity()};
+  // In percent, an open end is the span's end (100 %): with --in-flight, "40%:" ends where the flight does.
+  if (percent && has_span) w.end = span.end;
   const bool ok = colon != std::string_view::npos && number(text.substr(0, colon), w.start) &&
                   (colon + 1 == text.size() || number(text.substr(colon + 1), w.end)) &&
                   (needs_span || w.start < w.end);

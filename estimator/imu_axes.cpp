@@ -311,18 +311,25 @@ std::string_view name(ReferenceFrame frame) {
     case ReferenceFrame::imu: return "the IMU's";
     case ReferenceFrame::body: return "the body's";
     case ReferenceFrame::estimated: return "estimated";
-    case ReferenceFrame::assumed_imu: return "assumed the IMU's";
+    case ReferenceFrame::cannot_tell: return "cannot tell the IMU's from the body's";
   }
   return "?";
 }
 
 std::string describe(const ReferenceAlignment& a) {
   std::string s = "reference attitude frame: " + std::string(name(a.frame));
-  if (a.spans == 0) return s + " (too little rotation to tell)";
-  s += " (" + std::to_string(a.spans) + " spans" + format(", misfit %.2f deg RMS", a.rms_misfit_rad * 180 / kPi) +
+  if (a.spans < kAlignMinSpans)
+    return s + " (too little rotation to tell: " + std::to_string(a.spans) + " spans turning, " +
+           std::to_string(kAlignMinSpans) + " needed)";
+  s += " (" + std::to_string(a.spans) + " spans" +
+       format(", misfit as the IMU's %.2f deg", a.misfit_as_imu_rad * 180 / kPi) +
+       format(", as the body's %.2f deg RMS", a.misfit_as_body_rad * 180 / kPi) +
        format(", singular values %.3g, %.3g", a.singular_values[0], a.singular_values[1]) +
        format(", %.3g", a.singular_values[2]);
-  if (a.frame != ReferenceFrame::assumed_imu) s += format(", estimate %.1f deg from it", a.snap_angle_rad * 180 / kPi);
+  if (a.frame == ReferenceFrame::cannot_tell)
+    s += format(": a contrast of %.1f needed", kAlignMinContrast);
+  else if (a.estimate_determined)
+    s += format(", estimate %.1f deg from it", a.snap_angle_rad * 180 / kPi);
   return s + ")";
 }
 
@@ -348,38 +355,56 @@ ReferenceAlignment align_reference_frame(const ImuSeries& series, const Matrix3d
     if (r_ref.norm() > kAlignMinSpanAngle && r_imu.norm() > kAlignMinSpanAngle) pairs.emplace_back(r_ref, r_imu);
     a = b;
   }
-  if (pairs.empty()) return out;
+  out.spans = pairs.size();
+  if (pairs.size() < kAlignMinSpans) return out;  // cannot_tell
+  const auto misfit = [&pairs](const Matrix3d& r) {
+    double sum = 0.0;
+    for (const auto& [r_ref, r_imu] : pairs) sum += (r_ref - r * r_imu).squaredNorm();
+    return std::sqrt(sum / static_cast<double>(pairs.size()));
+  };
+  out.misfit_as_imu_rad = misfit(Matrix3d::Identity());
+  out.misfit_as_body_rad = misfit(imu_to_body);
   Matrix3d b = Matrix3d::Zero();
   for (const auto& [r_ref, r_imu] : pairs) b += r_ref * r_imu.transpose();
   // Dynamic size: GCC 12 warns (falsely) about the fixed-size JacobiSVD's uninitialised storage.
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Eigen::MatrixXd(b), Eigen::ComputeFullU | Eigen::ComputeFullV);
   out.singular_values = svd.singularValues();
-  out.spans = pairs.size();
-  if (pairs.size() < kAlignMinSpans || out.singular_values[1] < kAlignMinSingularRatio * out.singular_values[0]) {
-    return out;  // assumed_imu
-  }
-  Matrix3d d = Matrix3d::Identity();
-  const Matrix3d u = svd.matrixU(), v = svd.matrixV();
-  d(2, 2) = (u * v.transpose()).determinant() < 0.0 ? -1.0 : 1.0;
-  out.estimate = u * d * v.transpose();
-  double sum = 0.0;
-  for (const auto& [r_ref, r_imu] : pairs) sum += (r_ref - out.estimate * r_imu).squaredNorm();
-  out.rms_misfit_rad = std::sqrt(sum / static_cast<double>(pairs.size()));
-  // The two frames a reference is kept in; the small difference to either is the mounting the model fits.
-  const double to_imu = rotation_angle(out.estimate, Matrix3d::Identity());
-  const double to_body = rotation_angle(out.estimate, imu_to_body);
   const double snap = kAlignSnapDegrees * kPi / 180.0;
-  if (std::min(to_imu, to_body) > snap) {
-    out.frame = ReferenceFrame::estimated;
-    out.ref_from_imu = out.estimate;
-  } else if (to_body < to_imu) {
+  out.estimate_determined = out.singular_values[1] >= kAlignMinSingularRatio * out.singular_values[0];
+  if (out.estimate_determined) {
+    Matrix3d d = Matrix3d::Identity();
+    const Matrix3d u = svd.matrixU(), v = svd.matrixV();
+    d(2, 2) = (u * v.transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+    out.estimate = u * d * v.transpose();
+    out.rms_misfit_rad = misfit(out.estimate);
+    // Neither of the two frames a reference is kept in: the estimate itself.
+    if (std::min(rotation_angle(out.estimate, Matrix3d::Identity()), rotation_angle(out.estimate, imu_to_body)) >
+        snap) {
+      out.frame = ReferenceFrame::estimated;
+      out.ref_from_imu = out.estimate;
+      out.snap_angle_rad = 0.0;
+      return out;
+    }
+  }
+  // One frame when the IMU is mounted as the body (within the snap): nothing to tell apart.
+  if (rotation_angle(imu_to_body, Matrix3d::Identity()) <= snap) {
+    out.frame = ReferenceFrame::imu;
+    if (out.estimate_determined) out.snap_angle_rad = rotation_angle(out.estimate, Matrix3d::Identity());
+    return out;
+  }
+  const double better = std::min(out.misfit_as_imu_rad, out.misfit_as_body_rad);
+  const double worse = std::max(out.misfit_as_imu_rad, out.misfit_as_body_rad);
+  // cannot_tell (the IMU's applied) also when even the worse misfit is within a span's noise (kAlignMinSpanAngle).
+  if (!(worse >= kAlignMinContrast * better) || worse < kAlignMinSpanAngle) return out;
+  if (out.misfit_as_body_rad < out.misfit_as_imu_rad) {
     out.frame = ReferenceFrame::body;
     out.ref_from_imu = imu_to_body;
-    out.snap_angle_rad = to_body;
+    if (out.estimate_determined) out.snap_angle_rad = rotation_angle(out.estimate, imu_to_body);
   } else {
     out.frame = ReferenceFrame::imu;
-    out.snap_angle_rad = to_imu;
+    if (out.estimate_determined) out.snap_angle_rad = rotation_angle(out.estimate, Matrix3d::Identity());
   }
+  out.rms_misfit_rad = out.estimate_determined ? out.rms_misfit_rad : better;
   return out;
 }
 

@@ -132,22 +132,33 @@ inline constexpr std::size_t kAlignMinSpans = 8;
 // A span turning less than this is dominated by gyro noise and bias and by reference jitter: left out.
 inline constexpr double kAlignMinSpanAngle = 0.02;  // rad
 // Second singular value over the first below this: the rotations are (nearly) about one axis, so the rotation about
-// it is undetermined.
+// it is undetermined and no frame other than the two hypotheses is estimated.
 inline constexpr double kAlignMinSingularRatio = 0.05;
-// The estimate is taken to be "the IMU's frame" or "the body's frame" when within this of it; farther from both,
-// the estimate itself is used.
+// The estimate is "neither the IMU's frame nor the body's" when farther than this from both; nearer, the nearer of
+// the two is the candidate (the rest is the mounting the model fits).
 inline constexpr double kAlignSnapDegrees = 20.0;
+// The two hypotheses are told apart by how well each explains the increments: the wrong frame's RMS misfit must be at
+// least this many times the right one's. A flight turning about one axis only still tells the frames apart when they
+// differ about another axis (an IMU strapped on upside down, yawing); when they differ only about the axis it turns
+// about, or its rotations are within the noise, both misfit alike and the check says it cannot tell. A worse misfit
+// below kAlignMinSpanAngle is within a span's noise: cannot tell either.
+inline constexpr double kAlignMinContrast = 2.0;
 
-enum class ReferenceFrame { imu, body, estimated, assumed_imu };
+// cannot_tell: too few turning spans, or the two hypotheses explain them about equally; the IMU's frame is applied
+// and a warning says so.
+enum class ReferenceFrame { imu, body, estimated, cannot_tell };
 std::string_view name(ReferenceFrame frame);
 
 struct ReferenceAlignment {
   Eigen::Matrix3d ref_from_imu = Eigen::Matrix3d::Identity();  // what to apply: v_ref = R * v_imu
-  ReferenceFrame frame = ReferenceFrame::assumed_imu;
+  ReferenceFrame frame = ReferenceFrame::cannot_tell;
   Eigen::Matrix3d estimate = Eigen::Matrix3d::Identity();  // Wahba's solution (identity when not estimated)
   Eigen::Vector3d singular_values = Eigen::Vector3d::Zero();
   std::size_t spans = 0;          // spans used
   double rms_misfit_rad = 0.0;    // RMS of |r_ref - R r_imu| over the spans, for the estimate
+  double misfit_as_imu_rad = 0.0;   // the same for the IMU's frame (R = I)
+  double misfit_as_body_rad = 0.0;  // and for the body's (R = R_bs)
+  bool estimate_determined = false;  // enough spans, rotations about more than one axis: `estimate` is meaningful
   double snap_angle_rad = 0.0;    // angle between the estimate and what is applied
 };
 std::string describe(const ReferenceAlignment& alignment);

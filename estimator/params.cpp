@@ -43,8 +43,8 @@ constexpr std::array<std::string_view, 6> kPaperAxisKeys = {"r", "beta", "beta_d
 constexpr std::array<std::string_view, 13> kFullKeys = {
     "lever_arm",   "mounting",  "mounting_deg", "drag_linear", "drag_quadratic", "accel_bias",      "accel_scale",
     "accel_cross", "gyro_bias", "time_offset",  "wind",        "wind_heading",   "wind_heading_deg"};
-constexpr std::array<std::string_view, 7> kIdentificationKeys = {
-    "method", "seed", "fit_windows", "validation_windows", "std_errors", "rmse", "process_noise"};
+constexpr std::array<std::string_view, 8> kIdentificationKeys = {
+    "method", "seed", "fit_windows", "validation_windows", "std_errors", "rmse", "process_noise", "reference_delay"};
 
 std::string join(const std::string& path, std::string_view key) {
   return path.empty() ? std::string(key) : path + "." + std::string(key);
@@ -255,6 +255,11 @@ Identification read_identification(const json& j, const std::string& path) {
       throw std::invalid_argument("PARAMS.json: " + join(path, "process_noise") +
                                   " must be a finite number >= 0 (m/s^2/sqrt(Hz); 0: the filter's default)");
   }
+  if (j.contains("reference_delay")) {
+    id.reference_delay = get<double>(j.at("reference_delay"), join(path, "reference_delay"), "a number");
+    if (!std::isfinite(*id.reference_delay))
+      throw std::invalid_argument("PARAMS.json: " + join(path, "reference_delay") + " must be a finite number (s)");
+  }
   return id;
 }
 
@@ -341,6 +346,7 @@ void to_json(json& j, const Identification& id) {
            {"std_errors", id.std_errors},
            {"rmse", id.rmse},
            {"process_noise", id.process_noise}};
+  if (id.reference_delay) j["reference_delay"] = *id.reference_delay;
 }
 
 void from_json(const json& j, Identification& id) { id = read_identification(j, "identification"); }

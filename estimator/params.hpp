@@ -36,6 +36,9 @@ struct Identification {
   // The drag-velocity filter's process noise (m/s^2/sqrt(Hz)) when the identification fitted it (the filter error
   // method: docs/identification.md); 0: not fitted, the filter's default applies.
   double process_noise = 0.0;
+  // s: the reference velocity's delay behind the IMU that the reference was shifted by before fitting and scoring
+  // (declared or estimated: docs/identification.md, "Reference delay"); absent when there was no reference.
+  std::optional<double> reference_delay;
 
   friend bool operator==(const Identification&, const Identification&) = default;
 };

@@ -1,9 +1,13 @@
 #include "pipeline/session_series.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
 #include <map>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "estimator/differentiator.hpp"
@@ -102,12 +106,128 @@ void to_body_axes(SessionSeries& out, const std::string& declared) {
     ref_from_imu = out.reference_alignment->ref_from_imu;
     const auto frame = out.reference_alignment->frame;
     // Nothing to say when both hypotheses are the same frame (an FRD IMU) and the data agree.
-    const bool ambiguous = frame == estimator::ReferenceFrame::assumed_imu && r_bs != Eigen::Matrix3d::Identity();
+    const bool ambiguous = frame == estimator::ReferenceFrame::cannot_tell && r_bs != Eigen::Matrix3d::Identity();
     if (ambiguous || frame == estimator::ReferenceFrame::estimated)
       out.warnings.push_back(estimator::describe(*out.reference_alignment) +
                              (ambiguous ? ": taken as the IMU's" : ": neither the IMU's nor the body's"));
   }
   estimator::rotate_to_body(out.series, r_bs, ref_from_imu);
+}
+
+// The pose pair around `at_ns` and where between them: t_ns[i] <= at <= t_ns[i + 1]; nullopt outside the poses.
+std::optional<std::pair<std::size_t, double>> pose_around(const Reference& reference, std::int64_t at_ns) {
+  if (at_ns < reference.t_ns.front() || at_ns > reference.t_ns.back()) return std::nullopt;
+  const std::size_t i = std::min<std::size_t>(
+      std::upper_bound(reference.t_ns.begin(), reference.t_ns.end(), at_ns) - reference.t_ns.begin() - 1,
+      reference.t_ns.size() - 2);
+  return std::pair{i, static_cast<double>(at_ns - reference.t_ns[i]) /
+                          static_cast<double>(reference.t_ns[i + 1] - reference.t_ns[i])};
+}
+
+constexpr double kMaxDeclaredDelay = 10.0;  // s
+
+// The session's monotonic clock (recv_mono_ns, reference and event times) on the series' clock: the samples' device
+// time as a straight-line function of their reception time (least squares), so a live link's reception jitter moves
+// nothing.
+class SeriesClock {
+ public:
+  SeriesClock(const std::vector<double>& t, const std::vector<std::int64_t>& recv_ns) : origin_(recv_ns.front()) {
+    for (std::size_t k = 0; k < t.size(); ++k) mean_x_ += seconds(recv_ns[k]), mean_y_ += t[k];
+    mean_x_ /= static_cast<double>(t.size());
+    mean_y_ /= static_cast<double>(t.size());
+    double sxx = 0.0, sxy = 0.0;
+    for (std::size_t k = 0; k < t.size(); ++k) {
+      sxx += (seconds(recv_ns[k]) - mean_x_) * (seconds(recv_ns[k]) - mean_x_);
+      sxy += (seconds(recv_ns[k]) - mean_x_) * (t[k] - mean_y_);
+    }
+    slope_ = sxx > 0.0 ? sxy / sxx : 1.0;
+  }
+  double at(std::int64_t ns) const { return mean_y_ + slope_ * (seconds(ns) - mean_x_); }
+
+ private:
+  double seconds(std::int64_t ns) const { return static_cast<double>(ns - origin_) * 1e-9; }
+  std::int64_t origin_;
+  double mean_x_ = 0.0, mean_y_ = 0.0, slope_ = 1.0;
+};
+
+// When the log's own land detector says the vehicle flew: its takeoff and landing events, paired in time order (a
+// takeoff without a landing flies to the end; a landing without a takeoff from the start). nullopt without either.
+std::optional<std::vector<estimator::TimeWindow>> airborne_from_events(const store::Store& store, std::int64_t session,
+                                                                       const SeriesClock& clock) {
+  std::vector<store::Event> events;
+  for (store::Event& e : store.events(session)) {
+    if (e.kind == "takeoff" || e.kind == "landing") events.push_back(std::move(e));
+  }
+  if (events.empty()) return std::nullopt;
+  std::stable_sort(events.begin(), events.end(),
+                   [](const store::Event& a, const store::Event& b) { return a.mono_ns < b.mono_ns; });
+  constexpr double kForever = std::numeric_limits<double>::infinity();
+  std::vector<estimator::TimeWindow> out;
+  std::optional<double> takeoff;
+  bool first = true;
+  for (const store::Event& e : events) {
+    const double t = clock.at(e.mono_ns);
+    if (e.kind == "takeoff") {
+      if (!takeoff) takeoff = t;
+    } else if (takeoff || first) {
+      out.push_back({takeoff.value_or(-kForever), t});
+      takeoff.reset();
+    }
+    first = false;
+  }
+  if (takeoff) out.push_back({*takeoff, kForever});
+  return out;
+}
+
+// Estimates the delay unless declared, says so, and re-takes every sample's reference velocity at its reception
+// time plus the delay.
+void apply_reference_delay(SessionSeries& out, const Reference& reference, const std::vector<std::int64_t>& recv_ns,
+                           const std::optional<double>& declared) {
+  estimator::ImuSeries& series = out.series;
+  if (declared) {
+    out.reference_shift_s = *declared;
+    char line[120];
+    std::snprintf(line, sizeof line, "reference delay: %g s as declared (--reference-delay), the reference is %s",
+                  *declared, *declared == 0.0 ? "not shifted" : "shifted by it");
+    out.reference_delay_line = line;
+  } else {
+    const SeriesClock clock(series.t, recv_ns);
+    std::vector<double> pose_t;
+    for (const std::int64_t ns : reference.t_ns) pose_t.push_back(clock.at(ns));
+    out.reference_delay = estimator::estimate_reference_delay(series, pose_t, reference.velocity);
+    const estimator::ReferenceDelay& d = *out.reference_delay;
+    out.reference_delay_line = "reference delay: " + estimator::describe(d);
+    if (d.usable()) {
+      out.reference_shift_s = d.delay_s;
+      out.reference_delay_line += ", the reference is shifted by it";
+    } else {
+      out.reference_delay_line += ": the reference is not shifted (declare it with --reference-delay S)";
+    }
+  }
+  if (out.reference_shift_s == 0.0) return;
+  const auto shift_ns = static_cast<std::int64_t>(std::llround(out.reference_shift_s * 1e9));
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    const auto pose = pose_around(reference, recv_ns[k] + shift_ns);
+    if (!pose) {
+      ++out.counts.outside_reference;
+      continue;
+    }
+    const auto [i, f] = *pose;
+    series.t[kept] = series.t[k];
+    series.gyro[kept] = series.gyro[k];
+    series.accel[kept] = series.accel[k];
+    series.reference->attitude[kept] = series.reference->attitude[k];
+    series.reference->velocity_ned[kept] = (1.0 - f) * reference.velocity[i] + f * reference.velocity[i + 1];
+    ++kept;
+  }
+  if (kept == 0)
+    throw std::invalid_argument("no sample is left inside the reference once it is shifted by the reference delay");
+  series.t.resize(kept);
+  series.gyro.resize(kept);
+  series.accel.resize(kept);
+  series.reference->attitude.resize(kept);
+  series.reference->velocity_ned.resize(kept);
 }
 
 }  // namespace
@@ -144,6 +264,7 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
     recv_mono_ns.push_back(s.recv_mono_ns);
   });
   if (series.size() == 0) throw std::invalid_argument(session_name(session) + " has no usable samples");
+  out.airborne = airborne_from_events(store, session, SeriesClock(series.t, recv_mono_ns));
   if (options.reference == ReferenceUse::none) {
     to_body_axes(out, declared);
     return out;
@@ -155,30 +276,32 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
     return out;
   }
   if (reference.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
+  if (options.reference_delay && !(std::abs(*options.reference_delay) <= kMaxDeclaredDelay))
+    throw std::invalid_argument("a reference delay must be within +-10 s (it is a receiver's latency)");
   estimator::ImuSeries kept;
   kept.reference.emplace();
+  std::vector<std::int64_t> kept_recv_ns;
   for (std::size_t k = 0; k < series.size(); ++k) {
     const std::int64_t at = recv_mono_ns[k];
-    if (at < reference.t_ns.front() || at > reference.t_ns.back()) {
+    const auto pose = pose_around(reference, at);
+    if (!pose) {
       ++out.counts.outside_reference;
       continue;
     }
-    // The pose pair around `at`: t_ns[i] <= at <= t_ns[i + 1].
-    const std::size_t i = std::min<std::size_t>(
-        std::upper_bound(reference.t_ns.begin(), reference.t_ns.end(), at) - reference.t_ns.begin() - 1,
-        reference.t_ns.size() - 2);
-    const double f =
-        static_cast<double>(at - reference.t_ns[i]) / static_cast<double>(reference.t_ns[i + 1] - reference.t_ns[i]);
+    const auto [i, f] = *pose;
     kept.t.push_back(series.t[k]);
     kept.gyro.push_back(series.gyro[k]);
     kept.accel.push_back(series.accel[k]);
     kept.reference->velocity_ned.push_back((1.0 - f) * reference.velocity[i] + f * reference.velocity[i + 1]);
     kept.reference->attitude.push_back(reference.attitude[i].slerp(f, reference.attitude[i + 1]).normalized());
+    kept_recv_ns.push_back(at);
   }
   if (kept.size() == 0)
     throw std::invalid_argument(session_name(session) + ": no sample was received while the reference was recorded");
   series = std::move(kept);
   to_body_axes(out, declared);
+  if (options.reference_delay || options.estimate_reference_delay)
+    apply_reference_delay(out, reference, kept_recv_ns, options.reference_delay);
   return out;
 }
 

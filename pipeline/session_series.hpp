@@ -9,6 +9,8 @@
 
 #include "estimator/imu_axes.hpp"
 #include "estimator/imu_series.hpp"
+#include "estimator/params.hpp"
+#include "estimator/reference_delay.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::pipeline {
@@ -26,6 +28,11 @@ struct SessionSeriesOptions {
   // The IMU's axes (estimator::parse_imu_axes spelling), overriding what the link's recorded config declares
   // ("auto" when it declares nothing).
   std::optional<std::string> imu_axes{};
+  // The reference velocity's delay behind the IMU, s (docs/identification.md, "Reference delay"): declared, the
+  // reference is shifted by it (0: not shifted); else, with estimate_reference_delay, estimated
+  // (estimator::estimate_reference_delay) and shifted by when the estimate is usable.
+  std::optional<double> reference_delay{};
+  bool estimate_reference_delay = false;
 };
 
 // What was read and what was left out, and why. Nothing is dropped silently.
@@ -33,7 +40,8 @@ struct SessionSeriesCounts {
   std::uint64_t samples = 0;                 // the link's samples in the store
   std::uint64_t non_finite = 0;              // dropped: a NaN or infinite accelerometer or gyro value
   std::uint64_t time_not_increasing = 0;     // dropped: device time not after the previous kept sample's
-  std::uint64_t outside_reference = 0;       // dropped: received before the first or after the last pose
+  std::uint64_t outside_reference = 0;       // dropped: received (shifted by the reference delay) before the first
+                                             // or after the last pose
   std::uint64_t reference_rows = 0;          // poses in the store
   std::uint64_t reference_rows_dropped = 0;  // non-finite, zero quaternion, or time not after the previous pose
 };
@@ -44,6 +52,12 @@ struct SessionSeries {
   SessionSeriesCounts counts;
   estimator::AxesResolution axes;                                  // how the IMU's axes were turned into the body's
   std::optional<estimator::ReferenceAlignment> reference_alignment;  // with a reference: its attitude's frame
+  std::optional<estimator::ReferenceDelay> reference_delay;  // the estimate, when one was made
+  double reference_shift_s = 0.0;  // the reference velocity at sample time t is the reference's at t + this
+  std::string reference_delay_line;  // "reference delay: ..." for people; empty when the delay was not looked at
+  // When the log's own land detector says the vehicle flew (the session's takeoff and landing events, as `import
+  // ulog` stores them), on the series' clock; an open end is infinite. nullopt: the session has no such events.
+  std::optional<std::vector<estimator::TimeWindow>> airborne;
   std::vector<std::string> warnings;  // one line each, without a "warning: " prefix: axes mismatch, notes
 };
 
@@ -58,6 +72,11 @@ struct SessionSeries {
 // else the link's recorded config, else auto) are resolved against gravity detected in the samples, accel and gyro
 // are rotated by R_bs, and a reference attitude is re-expressed body -> NED after estimating whether it was the
 // IMU's or the body's. An FRD session with an FRD (or body) reference comes out bit for bit as read.
+//
+// With a reference delay (declared or estimated and usable), each sample takes the reference velocity (and only the
+// velocity: an autopilot's attitude is current) interpolated at its recv_mono_ns plus the delay; samples whose
+// shifted time falls outside the reference are dropped and counted in outside_reference. A declared delay outside
+// +-10 s is refused (std::invalid_argument).
 SessionSeries read_session_series(const store::Store& store, std::int64_t session,
                                   const SessionSeriesOptions& options = {});
 

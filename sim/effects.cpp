@@ -110,6 +110,22 @@ constexpr std::array kEffects{
            .min = 0,
            .max = 10,
            .apply = [](SimConfig& c, const Values& v) { c.imu.errors.gyro_noise_density = v[0]; }},
+    Effect{.info = {"reference_delay", "D", "the reference's position and velocity describe the vehicle D s before "
+                                            "their stamp (a GNSS receiver's latency; the attitude stays current), s"},
+           .counts = {1, 1},
+           .min = 0,
+           .max = 5,
+           .apply = [](SimConfig& c, const Values& v) { c.reference.delay_s = v[0]; }},
+    Effect{.info = {"reference_rate", "HZ", "reference poses per second (default: one per IMU sample), Hz"},
+           .counts = {1, 1},
+           .min = 0.1,
+           .max = 10000,
+           .apply = [](SimConfig& c, const Values& v) { c.reference.rate_hz = v[0]; }},
+    Effect{.info = {"reference_quantum", "Q", "reference velocity rounded to multiples of Q per component, m/s"},
+           .counts = {1, 1},
+           .min = 0,
+           .max = 10,
+           .apply = [](SimConfig& c, const Values& v) { c.reference.velocity_quantum = v[0]; }},
 };
 
 constexpr std::array<EffectInfo, kEffects.size()> kCatalogue = [] {

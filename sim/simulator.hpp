@@ -9,12 +9,14 @@
 #include "protocol/imu_frame.hpp"
 #include "sim/flight.hpp"
 #include "sim/imu_model.hpp"
+#include "sim/reference.hpp"
 
 namespace imubridge::sim {
 
 struct SimConfig {
   FlightConfig flight;
   ImuConfig imu;
+  ReferenceConfig reference;  // what a recording takes as its reference trajectory (sim/reference.hpp)
   double duration_s = 60.0;
   std::uint64_t seed = 0;
 };

@@ -220,7 +220,8 @@ TEST(Windows, PercentagesAreFractionsOfTheDataSpan) {
   const std::vector<double> t{10.0, 11.0, 12.0, 13.0, 14.0};      // data end 15 s: the span is [10, 15)
   EXPECT_EQ(parse_window("0:40%", t), (TimeWindow{10.0, 12.0}));  // one "%" makes both ends percentages
   EXPECT_EQ(parse_window("0%:40%", t), (TimeWindow{10.0, 12.0}));
-  EXPECT_EQ(parse_window("40%:", t), (TimeWindow{12.0, std::numeric_limits<double>::infinity()}));
+  EXPECT_EQ(parse_window("40%:", t), (TimeWindow{12.0, 15.0}));  // an open end is 100 %, the span's end
+  EXPECT_EQ(parse_window("40%:", TimeWindow{100.0, 200.0}), (TimeWindow{140.0, 200.0}));  // a flight's, not the log's
   EXPECT_EQ(parse_window("20%:100%", t), (TimeWindow{11.0, 15.0}));
   EXPECT_EQ(parse_window("20:60%", TimeWindow{100.0, 200.0}), (TimeWindow{120.0, 160.0}));  // of any span
   for (const char* bad : {"50%:40%", "-1%:20%", "0:101%", "%:10", "10%%:20%"})

@@ -250,7 +250,48 @@ TEST(ImuAxesReference, AlignmentRecoversAKnownRotation) {
   // A reference without rotation cannot tell: it falls back to the IMU's frame and says so.
   ImuSeries still = paper_flight();
   for (auto& q : still.reference->attitude) q = Eigen::Quaterniond::Identity();
-  EXPECT_EQ(align_reference_frame(still, parse_imu_axes("flu").imu_to_body).frame, ReferenceFrame::assumed_imu);
+  const ReferenceAlignment none = align_reference_frame(still, parse_imu_axes("flu").imu_to_body);
+  EXPECT_EQ(none.frame, ReferenceFrame::cannot_tell);
+  EXPECT_TRUE(none.ref_from_imu.isIdentity());
+  EXPECT_NE(describe(none).find("too little rotation"), std::string::npos) << describe(none);
+}
+
+// A flight that only yaws, its reference the body's: rotations about one axis, which leave Wahba's rotation about it
+// undetermined.
+ImuSeries yawing_flight() {
+  ImuSeries s;
+  s.reference.emplace();
+  double yaw = 0.0;
+  for (int k = 0; k < 4000; ++k) {
+    const double t = k * 0.005;
+    const double rate = 0.6 * std::sin(2.0 * kPi * 0.2 * t);
+    if (k > 0) yaw += 0.5 * (rate + s.gyro.back().z()) * 0.005;
+    s.t.push_back(t);
+    s.gyro.emplace_back(0.0, 0.0, rate);
+    s.accel.emplace_back(0.0, 0.0, -kGravity);
+    s.reference->attitude.emplace_back(Eigen::AngleAxisd(yaw, Vector3d::UnitZ()));
+    s.reference->velocity_ned.push_back(Vector3d::Zero());
+  }
+  return s;
+}
+
+TEST(ImuAxesReference, AYawOnlyFlightStillTellsAnUpsideDownImuFromTheBody) {
+  // Strapped on z up: the gyro reads the yaw with the opposite sign, which only the body's frame explains.
+  const Matrix3d flu = parse_imu_axes("flu").imu_to_body;
+  const ReferenceAlignment a = align_reference_frame(written_in(yawing_flight(), flu), flu);
+  EXPECT_FALSE(a.estimate_determined) << describe(a);
+  EXPECT_EQ(a.frame, ReferenceFrame::body) << describe(a);
+  EXPECT_TRUE(a.ref_from_imu.isApprox(flu));
+  EXPECT_GT(a.misfit_as_imu_rad, kAlignMinContrast * a.misfit_as_body_rad) << describe(a);
+}
+
+TEST(ImuAxesReference, AYawOnlyFlightCannotTellFramesThatDifferOnlyInYawAndSaysSo) {
+  // Strapped on turned 90 deg about z: about the one axis the flight turns about, both frames read the same.
+  const Matrix3d yawed = Eigen::AngleAxisd(0.5 * kPi, Vector3d::UnitZ()).toRotationMatrix();
+  const ReferenceAlignment a = align_reference_frame(written_in(yawing_flight(), yawed), yawed);
+  EXPECT_GE(a.spans, kAlignMinSpans);
+  EXPECT_EQ(a.frame, ReferenceFrame::cannot_tell) << describe(a);
+  EXPECT_NE(describe(a).find("cannot tell"), std::string::npos) << describe(a);
 }
 
 TEST(ImuAxesReference, AnFrdFlightWithTheBodysReferenceComesOutBitForBit) {

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/reference_delay_option.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/report.hpp"
@@ -38,6 +39,7 @@ struct DiagnoseCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  std::optional<double> reference_delay;
   std::string axis = "both", model = "paper";
   std::optional<std::string> velocity;
   WindowArgs windows;
@@ -241,11 +243,13 @@ int run(const DiagnoseCliOptions& o) {
                                  : *options.velocity == dg::VelocitySource::reference ? ReferenceUse::required
                                  : *options.velocity == dg::VelocitySource::filter    ? ReferenceUse::when_present
                                                                                       : ReferenceUse::none;
-  const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session, {.link = o.link, .reference = reference, .imu_axes = o.imu_axes});
+  pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
+  set_reference_delay(reading, o.reference_delay);
+  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
+  print_reference_delay(session);
   if (!options.velocity)
     options.velocity = session.series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
-  std::tie(options.train, options.validate) = o.windows.resolve(session.series);
+  std::tie(options.train, options.validate) = o.windows.resolve(session);
   // Progress on a terminal only: a log file or a pipe gets the summary alone.
   const bool show_progress = isatty(STDERR_FILENO) == 1;
   if (show_progress)
@@ -260,6 +264,7 @@ int run(const DiagnoseCliOptions& o) {
   dg::write_report_json(diagnosis, dir / "report.json");
   dg::write_report_html(diagnosis, dir);
   print_summary(diagnosis, o.report);
+  diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
   if (o.out) {
     est::save_params(*o.out, diagnosis.final_params);
     // Read back as run, replay and evaluate will: a model they would refuse is said so now, not at take-off.
@@ -291,6 +296,7 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
                   "error method) | imu (eq. 12's open-loop integral; drifts); default: reference when the session "
                   "has one, else filter");
   add_window_options(*cmd, o->windows);
+  add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
   cmd->add_option("--lowpass", o->lowpass_hz,

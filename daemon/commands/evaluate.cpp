@@ -10,6 +10,7 @@
 #include <string>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/reference_delay_option.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/params.hpp"
@@ -28,6 +29,7 @@ struct EvaluateCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  std::optional<double> reference_delay;
   bool in_flight = false;
   std::optional<std::string> window, baseline_train;
 };
@@ -38,13 +40,17 @@ json to_json(const est::VelocityError& e) {
 
 int run(const EvaluateCliOptions& o) {
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeries session = pipeline::read_session_series(
-      store, o.session, {.link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes});
+  pipeline::SessionSeriesOptions reading{
+      .link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes};
+  set_reference_delay(reading, o.reference_delay);
+  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  print_reference_delay(session);
   std::string left;
-  const est::ModelParams params = est::for_flight(est::load_params(o.params), est::flight_identity(session.series), &left);
+  const est::ModelParams params =
+      est::for_flight(est::load_params(o.params), est::flight_identity(session.series), &left);
   if (!left.empty()) std::fprintf(stderr, "%s\n", left.c_str());
-  const est::TimeWindow span = percent_span(session.series, o.in_flight).window;
+  const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
   const est::VelocityEvaluation e =
@@ -54,6 +60,7 @@ int run(const EvaluateCliOptions& o) {
                     {"link", session.link_id},
                     {"window", {e.window.start, e.window.end}},
                     {"samples", e.samples},
+                    {"reference_delay_s", session.reference_shift_s},
                     {"rmse_m_s",
                      {{"estimator", to_json(e.estimator)},
                       {"raw_inversion", to_json(e.inversion)},
@@ -102,6 +109,7 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
                   "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
                   "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
   add_in_flight_flag(*cmd, o->in_flight);
+  add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--window", o->window,
                   "Score only T0:T1, seconds from the session start or percent of it (40%:) (default: all)");
   return [o] { return run(*o); };

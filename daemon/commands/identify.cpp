@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/reference_delay_option.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/filter_identification.hpp"
@@ -38,6 +39,7 @@ struct IdentifyCliOptions {
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
+  std::optional<double> reference_delay;
   std::string model = "paper", method = "lm";
   std::optional<std::string> velocity;  // default: the reference when the session has one, else the filter
   WindowArgs windows;
@@ -173,16 +175,17 @@ int run(const IdentifyCliOptions& o) {
     throw std::invalid_argument("--hold applies to --model full only");
 
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeries session =
-      pipeline::read_session_series(store, o.session,
-                                    {.link = o.link,
-                                     // Read when present in any case: the velocity the model gives is scored against it
-                                     // (the filter's and eq. (12)'s fits never read it).
-                                     .reference = o.velocity && options.velocity == est::VelocitySource::reference
-                                                      ? pipeline::ReferenceUse::required
-                                                      : pipeline::ReferenceUse::when_present,
-                                     .imu_axes = o.imu_axes});
+  pipeline::SessionSeriesOptions reading{.link = o.link,
+                                         // Read when present in any case: the velocity the model gives is scored
+                                         // against it (the filter's and eq. (12)'s fits never read it).
+                                         .reference = o.velocity && options.velocity == est::VelocitySource::reference
+                                                          ? pipeline::ReferenceUse::required
+                                                          : pipeline::ReferenceUse::when_present,
+                                         .imu_axes = o.imu_axes};
+  set_reference_delay(reading, o.reference_delay);
+  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  print_reference_delay(session);
   if (!o.velocity)
     options.velocity = session.series.reference ? est::VelocitySource::reference : est::VelocitySource::filter;
   if (options.velocity == est::VelocitySource::filter && options.method != est::Method::lm)
@@ -190,10 +193,11 @@ int run(const IdentifyCliOptions& o) {
         o.velocity ? "--velocity filter fits by LM only (the GA would run the filter for every individual)"
                    : "session has no reference, so the velocity is the filter's, which fits by LM only (the GA would "
                      "run the filter for every individual); --velocity eq12 runs the paper's GA on the IMU alone");
-  std::tie(options.train, options.validate) = o.windows.resolve(session.series);
-  const est::IdentifyResult result = options.velocity == est::VelocitySource::filter
-                                         ? diagnose::identify_by_filter_error(session.series, options)
-                                         : est::identify(session.series, options);
+  std::tie(options.train, options.validate) = o.windows.resolve(session);
+  est::IdentifyResult result = options.velocity == est::VelocitySource::filter
+                                   ? diagnose::identify_by_filter_error(session.series, options)
+                                   : est::identify(session.series, options);
+  result.params.identification.reference_delay = recorded_reference_delay(session);
 
   // Refused, not warned about: a model no airframe has flies worse than none (docs/identification.md, "Plausibility").
   const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
@@ -247,6 +251,7 @@ const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--method", o->method, "ga (the paper's) | lm (Levenberg-Marquardt) | ga+lm")->capture_default_str();
   add_window_options(*cmd, o->windows);
   add_limit_option(*cmd, o->limits);
+  add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--velocity", o->velocity,
                   "Velocity in the drag term: reference | filter (IMU only: the drag-velocity filter running the "
                   "model, fitted by the filter error method) | eq12 (the paper's open-loop integral of the gyro; "

@@ -1,7 +1,8 @@
 #pragma once
 // The fit and validation windows as identify and diagnose take them (--train, --validate, --in-flight), and the
 // plausibility limits (--limit): one definition of the options and their help. What a percentage is a percentage of
-// is the session, or with --in-flight the part the vehicle flies (estimator::detect_flight), said on stderr; evaluate
+// is the session, or with --in-flight the part the vehicle flies (the log's land detector, else
+// estimator::detect_flight), said on stderr; evaluate
 // shares that too.
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include "estimator/flight_span.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/plausibility.hpp"
+#include "pipeline/session_series.hpp"
 
 namespace imubridge::cli {
 
@@ -24,9 +26,21 @@ struct PercentSpan {
   std::optional<estimator::TimeWindow> flight;
 };
 
-inline PercentSpan percent_span(const estimator::ImuSeries& series, bool in_flight) {
+// The flight by the log's own land detector when the session has one (import ulog stores its takeoff and landing),
+// else by the rotors' vibration (estimator::detect_flight); which one is said.
+inline PercentSpan percent_span(const pipeline::SessionSeries& session, bool in_flight) {
+  const estimator::ImuSeries& series = session.series;
   const estimator::TimeWindow whole = estimator::data_span(series.t);
   if (!in_flight) return {whole, std::nullopt};
+  if (session.airborne) {
+    if (const auto flight = estimator::flight_from_land_detector(*session.airborne, whole)) {
+      std::fprintf(stderr, "%s: percentages are of it\n", flight->description.c_str());
+      return {flight->window, flight->window};
+    }
+    std::fprintf(stderr,
+                 "warning: --in-flight: the log's land detector has no flight within the data; trying the rotors' "
+                 "vibration\n");
+  }
   if (const std::optional<estimator::FlightSpan> flight = estimator::detect_flight(series)) {
     std::fprintf(stderr, "%s: percentages are of it\n", flight->description.c_str());
     return {flight->window, flight->window};
@@ -52,20 +66,25 @@ inline void warn_outside_flight(const char* what, const estimator::TimeWindow& w
 
 inline void add_in_flight_flag(CLI::App& cmd, bool& in_flight) {
   cmd.add_flag("--in-flight", in_flight,
-               "Percentages in the windows are of the flight (detected from the rotors' vibration), not the session");
+               "Percentages in the windows are of the flight (by the log's land detector when the session has "
+               "one, else from the rotors' vibration), at both ends, not the session");
 }
 
 struct WindowArgs {
   std::optional<std::string> train, validate;
   bool in_flight = false;
 
-  // The windows, resolved against the series (nullopt: the command's default).
+  // The windows, resolved against the session (nullopt: the command's default; with a flight, the validation
+  // window's default ends where the flight does).
   std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> resolve(
-      const estimator::ImuSeries& series) const {
-    const PercentSpan span = percent_span(series, in_flight);
+      const pipeline::SessionSeries& session) const {
+    const estimator::ImuSeries& series = session.series;
+    const PercentSpan span = percent_span(session, in_flight);
     std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> out;
     if (train) out.first = estimator::parse_window(*train, span.window);
     if (validate) out.second = estimator::parse_window(*validate, span.window);
+    if (span.flight && out.first && !out.second && out.first->end < span.flight->end)
+      out.second = estimator::TimeWindow{out.first->end, span.flight->end};
     if (span.flight) {
       const estimator::TimeWindow data = estimator::data_span(series.t);
       const estimator::TimeWindow fit =

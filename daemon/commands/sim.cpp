@@ -112,6 +112,13 @@ nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
           {"rate_hz", config.imu.rate_hz}, {"effects", o.effects}, {"protocol", o.protocol}};
 }
 
+// The reference_* effects model a receiver's reference, which only a recorded session (--db) carries as such.
+void refuse_reference_effects(const sim::SimConfig& config, const char* output) {
+  if (!config.reference.is_truth())
+    throw std::invalid_argument(std::string("the reference_delay, reference_rate and reference_quantum effects apply "
+                                            "to --db only, not ") + output);
+}
+
 // The flight as a session: the bytes a ground station would have received, through the session engine and the
 // recorder the daemon uses, with the simulator's truth as the session's reference trajectory. The engine has no
 // estimation stage: sim has no parameters (a replay of the session estimates).
@@ -134,18 +141,21 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
   std::int64_t last_ns = 0;
+  sim::ReferenceReceiver receiver(config.reference);
   sim::simulate(config, [&](const sim::SimSample& s) {
     last_ns = to_ns(s.time_s);
     bytes.clear();
     encoder.encode(in_axes(s), bytes);
     if (!bytes.empty()) engine.on_chunk(0, recording, bytes, last_ns, start_wall + last_ns);
-    const auto& q = s.truth.attitude;
-    store.append_reference(
-        session,
-        {.t_ns = last_ns,
-         .position = {s.truth.position_ned.x(), s.truth.position_ned.y(), s.truth.position_ned.z()},
-         .quat_wxyz = {q.w(), q.x(), q.y(), q.z()},
-         .velocity = std::array{s.truth.velocity_ned.x(), s.truth.velocity_ned.y(), s.truth.velocity_ned.z()}});
+    if (const std::optional<sim::ReferencePose> pose = receiver.next(s.truth)) {
+      const auto& q = pose->attitude;
+      const auto& p = pose->position_ned;
+      const auto& v = pose->velocity_ned;
+      store.append_reference(session, {.t_ns = to_ns(pose->t),
+                                       .position = {p.x(), p.y(), p.z()},
+                                       .quat_wxyz = {q.w(), q.x(), q.y(), q.z()},
+                                       .velocity = std::array{v.x(), v.y(), v.z()}});
+    }
     store.commit_if_due(Clock::now());
   });
   bytes.clear();
@@ -164,6 +174,7 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
 // EuRoC/ASL layout. EuRoC's world frame has z up and its poses are the sensor's: so positions and velocities are
 // the IMU's (not the mass centre's), rotated from NED by 180 degrees about x, and q_RS takes sensor axes to world.
 int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
+  refuse_reference_effects(config, "--euroc");
   const fs::path root = fs::path(o.euroc) / "mav0";
   fs::create_directories(root / "imu0");
   fs::create_directories(root / "state_groundtruth_estimate0");
@@ -212,6 +223,7 @@ int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
 
 // The wire bytes, either into a file as fast as possible, or onto a pseudo-terminal at the flight's own pace.
 int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
+  refuse_reference_effects(config, o.pty.empty() ? "--file" : "--pty");
   const auto format = protocol::parse_wire_format(o.protocol);
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
@@ -267,6 +279,7 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
 // with ATTITUDE and LOCAL_POSITION_NED of the truth) a record stamped with a fixed epoch plus the flight's time, so a
 // seed always writes the same file and `import tlog` finds the simulator's samples and trajectory in it.
 int write_tlog(const SimOptions& o, const sim::SimConfig& config) {
+  refuse_reference_effects(config, "--tlog");
   if (o.protocol != "mavlink") throw std::invalid_argument("--tlog writes MAVLink telemetry: give --protocol mavlink");
   constexpr std::uint64_t kEpochUs = 1'704'067'200'000'000;  // 2024-01-01 00:00:00 UTC
   std::ofstream file(o.tlog, std::ios::binary | std::ios::trunc);
