@@ -461,6 +461,48 @@ TEST_F(ExportCommand, EventsQuoteTextAsRfc4180SaysAndKeepSessionEventsApart) {
   EXPECT_TRUE(json::parse(jsonl[1])["link_id"].is_null());
 }
 
+// A failed export leaves a good earlier one as it was (issue 28: it was emptied), and writes nothing new.
+TEST_F(ExportCommand, AFailedExportLeavesAnExistingFileUntouched) {
+  const fs::path out = dir_ / "est.csv";
+  const std::string base = "export --db " + db_.string() + " --out " + out.string();
+  const auto good = run_imubridge(base + " --session " + std::to_string(session_) + " --what estimates");
+  ASSERT_EQ(good.exit_code, 0) << good.err;
+  const std::string before = slurp(out);
+  ASSERT_EQ(lines_of(before).size(), 2u);
+  for (const std::string& args : {base + " --session " + std::to_string(session_) + " --what estimates --run 2",
+                                  base + " --session 99 --what estimates"}) {
+    const auto r = run_imubridge(args);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(slurp(out), before) << args;
+  }
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    EXPECT_NE(entry.path().filename().string().rfind(".est.csv", 0), 0u) << "a temporary file left: " << entry.path();
+  }
+  const fs::path fresh = dir_ / "fresh.csv";
+  EXPECT_EQ(run_imubridge("export --db " + db_.string() + " --out " + fresh.string() + " --session 99 --what samples")
+                .exit_code,
+            2);
+  EXPECT_FALSE(fs::exists(fresh));
+}
+
+// No empty store is left behind by an import that fails, and a store without its folder is a usage error.
+TEST_F(ReplayCommand, AFailedImportLeavesNoStoreAndAMissingFolderIsAUsageError) {
+  const fs::path db = dir_ / "new.db";
+  for (const char* format : {"ulog", "tlog", "euroc"}) {
+    const auto r = run_imubridge(std::string("import ") + format + " " + (dir_ / "unreadable").string() + " --db " + db.string());
+    EXPECT_EQ(r.exit_code, 2) << format << ": " << r.err;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    EXPECT_FALSE(fs::exists(db)) << format;
+    EXPECT_FALSE(fs::exists(db.string() + "-wal")) << format;
+  }
+  const auto r = run_imubridge("import ulog " + std::string(IMUBRIDGE_SOURCE_DIR) + "/tests/data/ulog/sample_log_small.ulg" +
+                               " --db " + (dir_ / "no folder" / "x.db").string());
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("no folder " + (dir_ / "no folder").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("give --db FILE"), std::string::npos) << r.err;
+}
+
 TEST_F(ExportCommand, OutWritesAFileInsteadOfStdout) {
   const fs::path out = dir_ / "samples.jsonl";
   const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) +

@@ -3,13 +3,13 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
 #include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "daemon/command.hpp"
+#include "fileio/whole_file.hpp"
 #include "replay/session_lookup.hpp"
 
 namespace imubridge::cli {
@@ -30,9 +30,9 @@ int run_export(const ExportCommandOptions& o) {
     std::ios::sync_with_stdio(false);
     replay::export_table(store, o.session, table, o.run, format, std::cout);
   } else {
-    std::ofstream out(o.out, std::ios::binary | std::ios::trunc);
-    if (!out) throw std::runtime_error("cannot write " + o.out);
-    replay::export_table(store, o.session, table, o.run, format, out);
+    fileio::WholeFile file(o.out);  // a failed export leaves an earlier FILE as it was
+    replay::export_table(store, o.session, table, o.run, format, file.stream());
+    file.commit();
   }
   // Once it worked: a mistake is one line.
   std::fprintf(stderr, "%s\n", replay::describe_state(replay::find_session(store, o.session)).c_str());
@@ -51,7 +51,7 @@ const RegisterCommand kExport([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--format", o->format, "Output format")
       ->check(CLI::IsMember({"csv", "jsonl"}))
       ->capture_default_str();
-  cmd->add_option("--out", o->out, "Output file (default: stdout)");
+  cmd->add_option("--out", o->out, "Output file, written whole or not at all (default: stdout)");
   cmd->footer("Columns are the store's (docs/storage.md). Absent values and NaN are empty in CSV, null in JSON.");
   return [o] { return run_export(*o); };
 });
