@@ -163,7 +163,7 @@ const char* describe_export_time(ExportTime time) {
 void export_table(const store::Store& store, std::int64_t session, ExportTable table, std::optional<std::int64_t> run,
                   ExportFormat format, ExportTime time, std::ostream& out) {
   find_session(store, session);
-  if (format == ExportFormat::mcap) throw std::invalid_argument("an MCAP export holds every table: leave out --what");
+  if (format == ExportFormat::mcap) throw std::logic_error("export_table writes CSV or JSON Lines; MCAP is export_mcap");
   if (run && table != ExportTable::estimates) throw std::invalid_argument("--run selects estimates only");
   // Before any output: these may fail.
   const std::optional<std::int64_t> chosen =

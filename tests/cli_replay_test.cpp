@@ -538,10 +538,10 @@ TEST_F(ReplayCommand, AFailedImportLeavesNoStoreAndAMissingFolderIsAUsageError) 
     EXPECT_FALSE(fs::exists(db.string() + "-wal")) << format;
   }
   const auto r = run_imubridge("import ulog " + std::string(IMUBRIDGE_SOURCE_DIR) + "/tests/data/ulog/sample_log_small.ulg" +
-                               " --db " + (dir_ / "no folder" / "x.db").string());
+                               " --db " + (dir_ / "no_folder" / "x.db").string());
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_EQ(count_lines(r.err), 1) << r.err;
-  EXPECT_NE(r.err.find("no folder " + (dir_ / "no folder").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("no folder " + (dir_ / "no_folder").string()), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("give --db FILE"), std::string::npos) << r.err;
 }
 

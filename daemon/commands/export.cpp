@@ -30,6 +30,9 @@ int run_export(const ExportCommandOptions& o) {
   if (format == replay::ExportFormat::mcap && o.out.empty()) {
     throw std::invalid_argument("--format mcap writes a file: give --out FILE.mcap");
   }
+  if (format == replay::ExportFormat::mcap && !o.what.empty()) {
+    throw std::invalid_argument("an MCAP export holds every table: leave out --what");
+  }
   if (format != replay::ExportFormat::mcap && o.what.empty()) {
     throw std::invalid_argument("--what is required: samples, estimates, reference or events");
   }
