@@ -1,8 +1,9 @@
 #include "diagnose/report_parts.hpp"
 
 #include <cmath>
-#include <fstream>
 #include <stdexcept>
+
+#include "fileio/whole_file.hpp"
 
 namespace imubridge::diagnose::report_parts {
 
@@ -29,9 +30,7 @@ std::string join(const std::vector<std::string>& items, std::string_view separat
 }
 
 void write_text(const std::filesystem::path& file, const std::string& text) {
-  std::ofstream out(file, std::ios::binary | std::ios::trunc);
-  out << text;
-  if (!out.flush()) throw std::invalid_argument("cannot write " + file.string());
+  fileio::write_whole_file(file, text);
 }
 
 }  // namespace imubridge::diagnose::report_parts

@@ -12,6 +12,7 @@
 
 #include "estimator/constants.hpp"
 #include "estimator/edit_distance.hpp"
+#include "fileio/whole_file.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -406,9 +407,7 @@ ModelParams load_params(const std::filesystem::path& path) {
 }
 
 void save_params(const std::filesystem::path& path, const ModelParams& params) {
-  std::ofstream out(path, std::ios::trunc);
-  out << json(params).dump(2) << "\n";
-  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
+  fileio::write_whole_file(path, json(params).dump(2) + "\n");
 }
 
 }  // namespace imubridge::estimator

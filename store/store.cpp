@@ -68,6 +68,10 @@ std::optional<std::int64_t> column_optional_int(const Statement& row, int column
 
 // Sequence numbers are unsigned 64-bit, SQLite integers signed: the bits are stored as they are.
 std::int64_t seq_to_column(std::uint64_t seq) { return static_cast<std::int64_t>(seq); }
+constexpr std::string_view kSelectSample =
+    "SELECT link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, gz, mx, my, mz, temperature_c, raw "
+    "FROM samples";
+
 std::uint64_t seq_from_column(std::int64_t value) { return static_cast<std::uint64_t>(value); }
 
 // SQLite stores a NaN as NULL, and a NULL reads back as the quiet NaN.
@@ -577,41 +581,63 @@ void Store::for_each_chunk(std::int64_t session, std::optional<std::int64_t> lin
 
 void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
                             const std::function<void(const protocol::Sample&)>& visit) const {
-  Statement query(db_,
-                  "SELECT link_id, seq, device_time_us, recv_mono_ns, ax, ay, az, gx, gy, gz, mx, my, mz, "
-                  "temperature_c, raw FROM samples WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
+  Statement query(db_, std::string(kSelectSample) +
+                           " WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
   query.bind_int(1, session);
   bind_optional_int(query, 2, link);
-  while (query.step()) {
-    protocol::Sample sample;
-    sample.link_id = query.column_int(0);
-    sample.seq = seq_from_column(query.column_int(1));
-    sample.device_time_us = query.column_int(2);
-    sample.recv_mono_ns = query.column_int(3);
-    sample.accel = column_reals<3>(query, 4);
-    sample.gyro = column_reals<3>(query, 7);
-    if (const auto mag = column_optional_reals<3>(query, 10)) {
-      sample.mag = *mag;
-      sample.has_mag = true;
-    }
-    if (const auto temperature = column_optional_reals<1>(query, 13)) {
-      sample.temperature_c = (*temperature)[0];
-      sample.has_temperature = true;
-    }
-    if (!query.is_null(14)) {
-      const auto raw = query.column_blob(14);
-      if (raw.size() != kRawBytes) {
-        throw StoreError(db_.name() + ": a sample of session " + std::to_string(session) + " has " +
-                         std::to_string(raw.size()) + " bytes of raw counts, not " + std::to_string(kRawBytes));
-      }
-      sample.raw = decode_raw(raw);
-      sample.has_raw = true;
-    }
-    visit(sample);
-  }
+  while (query.step()) visit(sample_from_row(query, session));
   for (const auto& w : samples_.waiting) {  // appended after every row above
     if (w.session == session && (!link || w.sample.link_id == *link)) visit(as_stored(w.sample));
   }
+}
+
+std::vector<protocol::Sample> Store::first_samples(std::int64_t session) const {
+  std::vector<protocol::Sample> firsts;
+  for (const Link& link : links(session)) {
+    // The index on session_id keeps each session's rows in id order: the first match is the link's first sample.
+    Statement query(db_, std::string(kSelectSample) + " WHERE session_id = ?1 AND link_id = ?2 ORDER BY id LIMIT 1");
+    query.bind_int(1, session);
+    query.bind_int(2, link.id);
+    if (query.step()) {
+      firsts.push_back(sample_from_row(query, session));
+      continue;
+    }
+    for (const auto& w : samples_.waiting) {  // none committed yet
+      if (w.session == session && w.sample.link_id == link.id) {
+        firsts.push_back(as_stored(w.sample));
+        break;
+      }
+    }
+  }
+  return firsts;
+}
+
+protocol::Sample Store::sample_from_row(const Statement& query, std::int64_t session) const {
+  protocol::Sample sample;
+  sample.link_id = query.column_int(0);
+  sample.seq = seq_from_column(query.column_int(1));
+  sample.device_time_us = query.column_int(2);
+  sample.recv_mono_ns = query.column_int(3);
+  sample.accel = column_reals<3>(query, 4);
+  sample.gyro = column_reals<3>(query, 7);
+  if (const auto mag = column_optional_reals<3>(query, 10)) {
+    sample.mag = *mag;
+    sample.has_mag = true;
+  }
+  if (const auto temperature = column_optional_reals<1>(query, 13)) {
+    sample.temperature_c = (*temperature)[0];
+    sample.has_temperature = true;
+  }
+  if (!query.is_null(14)) {
+    const auto raw = query.column_blob(14);
+    if (raw.size() != kRawBytes) {
+      throw StoreError(db_.name() + ": a sample of session " + std::to_string(session) + " has " +
+                       std::to_string(raw.size()) + " bytes of raw counts, not " + std::to_string(kRawBytes));
+    }
+    sample.raw = decode_raw(raw);
+    sample.has_raw = true;
+  }
+  return sample;
 }
 
 void Store::for_each_estimate(std::int64_t run, const std::function<void(const Estimate&)>& visit) const {

@@ -129,6 +129,8 @@ class Store {
                       const std::function<void(const Chunk&)>& visit) const;
   void for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
                        const std::function<void(const protocol::Sample&)>& visit) const;
+  // Each link's first sample, in link order (links without samples left out): where the session's time starts.
+  std::vector<protocol::Sample> first_samples(std::int64_t session) const;
   void for_each_estimate(std::int64_t run, const std::function<void(const Estimate&)>& visit) const;
   void for_each_reference(std::int64_t session, const std::function<void(const ReferenceRow&)>& visit) const;
 
@@ -163,6 +165,8 @@ class Store {
   // Inserts a row others will refer to, commits, and returns its id.
   std::int64_t insert_committed(Statement& insert, std::string_view what);
   [[noreturn]] void fail(const StoreError& error, std::string_view what);
+  // One row of a query selecting kSelectSample's columns.
+  protocol::Sample sample_from_row(const Statement& query, std::int64_t session) const;
 
   Database db_;
   Options options_;

@@ -106,5 +106,19 @@ TEST_F(DiagnoseCommand, BadInputIsOneLineAndExitCode2) {
   expect_error(diagnose("--session 9" + report), "no session 9");
 }
 
+// A user who wants the model only needs no report directory (issue 28).
+TEST_F(DiagnoseCommand, OutAloneWritesTheModelWithoutAReport) {
+  const fs::path params = dir_ / "model_only" / "PARAMS.json";
+  fs::create_directories(params.parent_path());
+  const CommandResult r = diagnose("--session 1 --axis x --train 0:20 --validate 20:30 --max-steps 0 --out " +
+                                   params.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json model = json::parse(slurp(params));
+  EXPECT_TRUE(model.is_object() && !model.empty()) << model.dump();
+  EXPECT_EQ(r.out.find("report.json"), std::string::npos) << r.out;
+  EXPECT_EQ(std::distance(fs::directory_iterator(params.parent_path()), fs::directory_iterator()), 1)
+      << "PARAMS.json alone, no report and no temporary file";
+}
+
 }  // namespace
 }  // namespace imubridge::test

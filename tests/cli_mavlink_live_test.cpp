@@ -146,7 +146,9 @@ void expect_reference_is_truth(const store::Store& store, const std::vector<sim:
     const Eigen::Quaterniond q(rows[i].quat_wxyz[0], rows[i].quat_wxyz[1], rows[i].quat_wxyz[2], rows[i].quat_wxyz[3]);
     EXPECT_GT(std::abs(q.dot(truth[i].attitude)), 1 - 1e-6) << i;
     EXPECT_TRUE(chunk_times.contains(rows[i].t_ns)) << i;
-    if (i > 0) EXPECT_GT(rows[i].t_ns, rows[i - 1].t_ns);
+    if (i > 0) {
+      EXPECT_GT(rows[i].t_ns, rows[i - 1].t_ns);
+    }
   }
 }
 

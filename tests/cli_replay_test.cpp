@@ -382,9 +382,9 @@ class ExportCommand : public ReplayCommand {
     store.append_event(session_, {.mono_ns = 30, .wall_ns = 40, .kind = "reconnect", .count = 2, .detail = "plain"});
   }
 
-  std::string exported(const std::string& what, const std::string& format) {
+  std::string exported(const std::string& what, const std::string& format, const std::string& time = "recorded") {
     const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) + " --what " +
-                                 what + " --format " + format);
+                                 what + " --format " + format + " --time " + time);
     EXPECT_EQ(r.exit_code, 0) << r.err;
     return r.out;
   }
@@ -424,7 +424,7 @@ TEST_F(ExportCommand, JsonlEstimatesWriteNanAsNull) {
   ASSERT_EQ(lines.size(), 1u);
   const json j = json::parse(lines[0]);
   EXPECT_EQ(j["seq"], 7);
-  EXPECT_EQ(j["t_s"].get<double>(), 0.035);
+  EXPECT_EQ(j["device_t_s"].get<double>(), 0.035);
   EXPECT_EQ(j["fy"].get<double>(), 0.1 + 0.2);
   EXPECT_TRUE(std::signbit(j["fx"].get<double>()));
   EXPECT_TRUE(j["vx"].is_null() && j["vy"].is_null() && j["var_vx"].is_null());
@@ -440,7 +440,7 @@ TEST_F(ExportCommand, JsonlEstimatesWriteNanAsNull) {
 TEST_F(ExportCommand, ReferenceWithoutVelocityIsEmptyOrNull) {
   const auto csv = lines_of(exported("reference", "csv"));
   ASSERT_EQ(csv.size(), 3u);
-  EXPECT_EQ(csv[0], "t_ns,px,py,pz,qw,qx,qy,qz,vx,vy,vz");
+  EXPECT_EQ(csv[0], "mono_ns,px,py,pz,qw,qx,qy,qz,vx,vy,vz");
   EXPECT_EQ(csv_fields(csv[1])[8], "0.5");
   EXPECT_EQ(csv_fields(csv[2])[8], "");
   const auto jsonl = lines_of(exported("reference", "jsonl"));
@@ -459,6 +459,90 @@ TEST_F(ExportCommand, EventsQuoteTextAsRfc4180SaysAndKeepSessionEventsApart) {
   ASSERT_EQ(jsonl.size(), 2u);
   EXPECT_EQ(json::parse(jsonl[0])["detail"], "a, \"quoted\" word\nsecond line");
   EXPECT_TRUE(json::parse(jsonl[1])["link_id"].is_null());
+}
+
+// Session time by default, as identify, diagnose and import speak: samples and estimates from their link's first
+// sample on the IMU's clock (5000 us here), reference and events from the first sample's arrival (123456789012 ns).
+TEST_F(ExportCommand, SessionTimeIsTheDefaultAndSaysSo) {
+  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) +
+                               " --what samples");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto samples = lines_of(r.out);
+  ASSERT_EQ(samples.size(), 3u);
+  EXPECT_EQ(samples[0], "link_id,seq,session_t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temperature_c");
+  EXPECT_EQ(csv_fields(samples[1])[2], "0");
+  EXPECT_EQ(csv_fields(samples[2])[2], "0.005");  // device time 10000 us
+  EXPECT_NE(r.err.find("times: session time (session_t_s: s since the first sample)"), std::string::npos) << r.err;
+  const auto estimates = lines_of(exported("estimates", "jsonl", "session"));
+  ASSERT_EQ(estimates.size(), 1u);
+  EXPECT_EQ(json::parse(estimates[0])["session_t_s"].get<double>(), 0.03);  // 0.035 s on the IMU's clock
+  const auto reference = lines_of(exported("reference", "csv", "session"));
+  EXPECT_EQ(reference[0], "session_t_s,px,py,pz,qw,qx,qy,qz,vx,vy,vz");
+  EXPECT_EQ(std::strtod(csv_fields(reference[1])[0].c_str(), nullptr), (10 - 123456789012) / 1e9);
+  const auto events = lines_of(exported("events", "csv", "session"));
+  EXPECT_EQ(events[0], "link_id,session_t_s,wall_ns,kind,count,detail");
+  const auto recorded = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) +
+                                      " --what samples --time recorded");
+  EXPECT_NE(recorded.err.find("times: the store's clocks"), std::string::npos) << recorded.err;
+}
+
+TEST_F(ExportCommand, SessionTimeOfASessionWithoutSamplesIsRefusedWithTheRemedy) {
+  std::int64_t empty = 0;
+  {
+    store::Store store(db_);
+    empty = store.begin_session({.kind = "sim", .config = "{}"});
+  }
+  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(empty) +
+                               " --what events");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("has no samples, so no session time"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--time recorded"), std::string::npos) << r.err;
+  EXPECT_EQ(run_imubridge("export --db " + db_.string() + " --session " + std::to_string(empty) +
+                          " --what events --time recorded")
+                .exit_code,
+            0);
+}
+
+// A failed export leaves a good earlier one as it was (issue 28: it was emptied), and writes nothing new.
+TEST_F(ExportCommand, AFailedExportLeavesAnExistingFileUntouched) {
+  const fs::path out = dir_ / "est.csv";
+  const std::string base = "export --db " + db_.string() + " --out " + out.string();
+  const auto good = run_imubridge(base + " --session " + std::to_string(session_) + " --what estimates");
+  ASSERT_EQ(good.exit_code, 0) << good.err;
+  const std::string before = slurp(out);
+  ASSERT_EQ(lines_of(before).size(), 2u);
+  for (const std::string& args : {base + " --session " + std::to_string(session_) + " --what estimates --run 2",
+                                  base + " --session 99 --what estimates"}) {
+    const auto r = run_imubridge(args);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(slurp(out), before) << args;
+  }
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    EXPECT_NE(entry.path().filename().string().rfind(".est.csv", 0), 0u) << "a temporary file left: " << entry.path();
+  }
+  const fs::path fresh = dir_ / "fresh.csv";
+  EXPECT_EQ(run_imubridge("export --db " + db_.string() + " --out " + fresh.string() + " --session 99 --what samples")
+                .exit_code,
+            2);
+  EXPECT_FALSE(fs::exists(fresh));
+}
+
+// No empty store is left behind by an import that fails, and a store without its folder is a usage error.
+TEST_F(ReplayCommand, AFailedImportLeavesNoStoreAndAMissingFolderIsAUsageError) {
+  const fs::path db = dir_ / "new.db";
+  for (const char* format : {"ulog", "tlog", "euroc"}) {
+    const auto r = run_imubridge(std::string("import ") + format + " " + (dir_ / "unreadable").string() + " --db " + db.string());
+    EXPECT_EQ(r.exit_code, 2) << format << ": " << r.err;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    EXPECT_FALSE(fs::exists(db)) << format;
+    EXPECT_FALSE(fs::exists(db.string() + "-wal")) << format;
+  }
+  const auto r = run_imubridge("import ulog " + std::string(IMUBRIDGE_SOURCE_DIR) + "/tests/data/ulog/sample_log_small.ulg" +
+                               " --db " + (dir_ / "no_folder" / "x.db").string());
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("no folder " + (dir_ / "no_folder").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("give --db FILE"), std::string::npos) << r.err;
 }
 
 TEST_F(ExportCommand, OutWritesAFileInsteadOfStdout) {

@@ -33,7 +33,9 @@ TEST(SurveyScenario, TurnsAreStepsOfTheYawRateBetweenLegs) {
   for (double t = 0.0; t < 120.0; t += 0.01) {
     const double rate = yaw_rate.at(t).value;
     ASSERT_LE(std::abs(rate), config.rate_max_radps);
-    if (t < config.first_start_s) ASSERT_EQ(rate, 0.0);
+    if (t < config.first_start_s) {
+      ASSERT_EQ(rate, 0.0);
+    }
     if (!turning && rate != 0.0) ++turns;
     turning = rate != 0.0;
   }

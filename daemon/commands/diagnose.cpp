@@ -1,6 +1,6 @@
 // `imubridge diagnose`: fit the base model to a recorded session, analyse what its residual still holds, add the
 // library's effects one at a time while they lower the validation error significantly, and write DIR/report.json
-// and DIR/report.html (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
+// and DIR/report.html with --report DIR (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
 // goes to stdout.
 #include <unistd.h>
 
@@ -35,7 +35,8 @@ namespace dg = imubridge::diagnose;
 namespace est = imubridge::estimator;
 
 struct DiagnoseCliOptions {
-  std::string db, report;
+  std::string db;
+  std::optional<std::string> report;
   std::int64_t session = 0;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
@@ -178,7 +179,7 @@ void print_velocity(const dg::ModelFit& fit) {
   print_velocity_scores(*fit.velocity);
 }
 
-void print_summary(const dg::Diagnosis& d, const std::string& report) {
+void print_summary(const dg::Diagnosis& d) {
   for (const std::string& w : d.warnings) std::printf("warning: %s\n", w.c_str());
   if (!d.imu_axes.empty()) std::printf("%s\n", d.imu_axes.c_str());
   std::printf("diagnosed %s: %s model, axes", d.session.c_str(), d.model.c_str());
@@ -219,7 +220,6 @@ void print_summary(const dg::Diagnosis& d, const std::string& report) {
   std::printf("final residual %s\n", d.residual_white ? "white" : "NOT white");
   for (const dg::Unexplained& u : d.unexplained)
     std::printf("  unexplained (%s, axis %s): %s\n", u.kind.c_str(), u.axis.c_str(), u.where.c_str());
-  std::printf("wrote %s/report.json and %s/report.html\n", report.c_str(), report.c_str());
 }
 
 int run(const DiagnoseCliOptions& o) {
@@ -259,12 +259,15 @@ int run(const DiagnoseCliOptions& o) {
   diagnosis.imu_axes = session.axes.description;
   diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
 
-  const std::filesystem::path dir(o.report);
-  std::filesystem::create_directories(dir);
-  dg::write_report_json(diagnosis, dir / "report.json");
-  dg::write_report_html(diagnosis, dir);
-  print_summary(diagnosis, o.report);
   diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
+  print_summary(diagnosis);
+  if (o.report) {
+    const std::filesystem::path dir(*o.report);
+    std::filesystem::create_directories(dir);
+    dg::write_report_json(diagnosis, dir / "report.json");
+    dg::write_report_html(diagnosis, dir);
+    std::printf("wrote %s/report.json and %s/report.html\n", o.report->c_str(), o.report->c_str());
+  }
   if (o.out) {
     est::save_params(*o.out, diagnosis.final_params);
     // Read back as run, replay and evaluate will: a model they would refuse is said so now, not at take-off.
@@ -303,7 +306,7 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
                   "Compare model and measurement below this frequency only, Hz (0: off); for airframes whose "
                   "vibration swamps the accelerometers")
       ->capture_default_str();
-  cmd->add_option("--report", o->report, "Directory for report.json and report.html (created if needed)")->required();
+  cmd->add_option("--report", o->report, "Directory for report.json and report.html (created if needed)");
   cmd->add_option("--out", o->out,
                   "Write the final model (base plus every effect added, with standard errors) as PARAMS.json for "
                   "run, replay and evaluate");

@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -25,6 +24,7 @@
 #include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
+#include "fileio/whole_file.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
 
@@ -125,12 +125,6 @@ void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& resul
   std::fprintf(stderr, "wall time %.3f s; wrote %s\n", wall_seconds, o.out.c_str());
 }
 
-void write_text(const fs::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::trunc);
-  out << text;
-  if (!out.flush()) throw std::runtime_error("cannot write " + path.string());
-}
-
 // The GA's convergence curves (the paper's Fig. 12): one row per generation, one column per fitted group.
 void write_convergence(const fs::path& path, const std::vector<est::FitReport>& fits) {
   std::string csv = "generation";
@@ -145,7 +139,7 @@ void write_convergence(const fs::path& path, const std::vector<est::FitReport>& 
     }
     csv += "\n";
   }
-  write_text(path, csv);
+  fileio::write_whole_file(path, csv);
 }
 
 est::FullHold parse_hold(const std::vector<std::string>& names) {

@@ -9,6 +9,7 @@
 #include "daemon/command.hpp"
 #include "daemon/config.hpp"
 #include "daemon/import_progress_line.hpp"
+#include "daemon/new_store.hpp"
 #include "replay/euroc_import.hpp"
 #include "replay/tlog_import.hpp"
 #include "replay/ulog_import.hpp"
@@ -93,6 +94,7 @@ int run_import_ulog(const ImportCommandOptions& o) {
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
   apply_given(o, options);
+  const daemon::NewStoreGuard new_store(o.db);
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);
   options.progress = progress.callback();
@@ -135,6 +137,7 @@ int run_import_tlog(const ImportCommandOptions& o) {
   replay::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference};
   apply_given(o, options);
   if (!o.imu_message.empty()) options.imu_message = o.imu_message;
+  const daemon::NewStoreGuard new_store(o.db);
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);
   options.progress = progress.callback();
@@ -192,6 +195,7 @@ int run_import(const ImportCommandOptions& o) {
   replay::EurocImportOptions options{
       .dir = o.dir, .accel_lsb = o.accel_lsb, .gyro_lsb = o.gyro_lsb, .imu_axes = o.imu_axes};
   if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
+  const daemon::NewStoreGuard new_store(o.db);
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);  // the bytes are those of its mav0/imu0/data.csv
   options.progress = progress.callback();

@@ -6,8 +6,8 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
@@ -17,8 +17,10 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/new_store.hpp"
 #include "daemon/pty.hpp"
 #include "estimator/imu_axes.hpp"
+#include "fileio/whole_file.hpp"
 #include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
@@ -124,6 +126,7 @@ void refuse_reference_effects(const sim::SimConfig& config, const char* output) 
 // estimation stage: sim has no parameters (a replay of the session estimates).
 int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   const auto format = protocol::parse_wire_format(o.protocol);
+  const daemon::NewStoreGuard new_store(o.db);
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
@@ -178,9 +181,10 @@ int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
   const fs::path root = fs::path(o.euroc) / "mav0";
   fs::create_directories(root / "imu0");
   fs::create_directories(root / "state_groundtruth_estimate0");
-  std::ofstream imu(root / "imu0" / "data.csv");
-  std::ofstream truth(root / "state_groundtruth_estimate0" / "data.csv");
-  if (!imu || !truth) throw std::runtime_error("cannot write into " + o.euroc);
+  fileio::WholeFile imu_file(root / "imu0" / "data.csv");
+  fileio::WholeFile truth_file(root / "state_groundtruth_estimate0" / "data.csv");
+  std::ostream& imu = imu_file.stream();
+  std::ostream& truth = truth_file.stream();
   imu << "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
          "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n";
   truth << "#timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z [],"
@@ -215,7 +219,8 @@ int write_euroc(const SimOptions& o, const sim::SimConfig& config) {
           << errors.accel_bias.y() << ',' << errors.accel_bias.z() << '\n';
     ++n;
   });
-  if (!imu.flush() || !truth.flush()) throw std::runtime_error("write error in " + o.euroc);
+  imu_file.commit();
+  truth_file.commit();
   std::fprintf(stderr, "wrote %llu samples in EuRoC/ASL layout under %s\n", static_cast<unsigned long long>(n),
                o.euroc.c_str());
   return 0;
@@ -228,7 +233,7 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
   std::unique_ptr<PtyPair> pty;
-  std::ofstream file;
+  std::optional<fileio::WholeFile> file;
   if (!o.pty.empty()) {
     pty = std::make_unique<PtyPair>(o.pty);
     std::fprintf(stderr, "streaming %s frames on %s (%s) at %gx real time; Ctrl-C stops\n", o.protocol.c_str(),
@@ -236,8 +241,7 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
     std::signal(SIGINT, on_stop_signal);
     std::signal(SIGTERM, on_stop_signal);
   } else {
-    file.open(o.file, std::ios::binary | std::ios::trunc);
-    if (!file) throw std::runtime_error("cannot write " + o.file);
+    file.emplace(o.file);
   }
   const auto start = Clock::now();
   std::uint64_t written = 0;
@@ -247,7 +251,7 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
       std::this_thread::sleep_until(start + std::chrono::nanoseconds(to_ns(t / o.speed)));
       pty->write(bytes);
     } else {
-      file.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+      file->stream().write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
     }
     written += bytes.size();
     bytes.clear();
@@ -264,7 +268,7 @@ int stream_bytes(const SimOptions& o, const sim::SimConfig& config) {
   }
   encoder.flush(bytes);
   deliver(t);
-  if (file.is_open() && !file.flush()) throw std::runtime_error("write error on " + o.file);
+  if (file) file->commit();
   const std::size_t unread = pty ? pty->drain() : 0;  // closing the pty would discard what its reader has not read
   std::fprintf(stderr, "sent %llu bytes (%.1f s of flight)", static_cast<unsigned long long>(written), t);
   if (pty && pty->dropped_bytes() + unread > 0) {
@@ -282,8 +286,7 @@ int write_tlog(const SimOptions& o, const sim::SimConfig& config) {
   refuse_reference_effects(config, "--tlog");
   if (o.protocol != "mavlink") throw std::invalid_argument("--tlog writes MAVLink telemetry: give --protocol mavlink");
   constexpr std::uint64_t kEpochUs = 1'704'067'200'000'000;  // 2024-01-01 00:00:00 UTC
-  std::ofstream file(o.tlog, std::ios::binary | std::ios::trunc);
-  if (!file) throw std::runtime_error("cannot write " + o.tlog);
+  fileio::WholeFile file(o.tlog);
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
   sim::MavlinkTelemetry telemetry;
   std::vector<std::vector<std::uint8_t>> frames;
@@ -295,10 +298,10 @@ int write_tlog(const SimOptions& o, const sim::SimConfig& config) {
     telemetry.encode(in_axes(s), frames);
     const auto t = kEpochUs + static_cast<std::uint64_t>(std::llround(s.time_s * 1e6));
     for (const auto& frame : frames) replay::tlog::append_record(bytes, t, frame);
-    file.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    file.stream().write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
     records += frames.size();
   });
-  if (!file.flush()) throw std::runtime_error("write error on " + o.tlog);
+  file.commit();
   std::fprintf(stderr, "wrote %llu MAVLink records (%.1f s of flight) into %s\n",
                static_cast<unsigned long long>(records), config.duration_s, o.tlog.c_str());
   return 0;
