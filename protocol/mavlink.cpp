@@ -172,8 +172,14 @@ FrameCheck check_frame(std::span<const std::uint8_t> c) {
   const Header h = Header::read(c.data());
   if (h.incompat_flags & ~kIncompatSigned) return {Status::malformed};  // a feature we cannot parse
   const MessageSpec* spec = message_spec(h.msgid);
-  if (!spec) return {c.size() < h.frame_size() ? Status::cut_short : Status::unverified, h.frame_size()};
-  return check_known(c, h, *spec);
+  const bool whole = c.size() >= h.frame_size();
+  if (!spec) return {whole ? Status::unverified : Status::cut_short, h.frame_size(), h.msgid};
+  FrameCheck check = check_known(c, h, *spec);
+  // The only malformed check_known finds is a MAVLink 1 length: a stream's decoder rejects it at once, but a log,
+  // which says where frames start, holds a frame of a layout not known here.
+  if (check.status == Status::malformed) check.status = whole ? Status::other_layout : Status::cut_short;
+  check.msgid = h.msgid;
+  return check;
 }
 
 // Each verdict depends on the candidate's bytes only, so the chunking of the stream cannot change it.
@@ -192,6 +198,7 @@ inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /
     case FrameCheck::Status::cut_short:
       return {Verdict::need_more};
     case FrameCheck::Status::unverified:
+    case FrameCheck::Status::other_layout:
     case FrameCheck::Status::malformed:
       break;
   }

@@ -63,12 +63,16 @@ struct FrameCheck {
   enum class Status {
     frame,       // a frame that passed every check
     unverified,  // well formed, but its id has no CRC_EXTRA here, so nothing could check it
+    // well formed, but a MAVLink 1 length its id's message (as known here) cannot have: another dialect's or an older
+    // version's message of that id, which nothing here can check. A stream's decoder takes it for a false start.
+    other_layout,
     bad_crc,     // a known id whose CRC does not match
     malformed,   // no STX, an incompat flag this decoder cannot parse, or a MAVLink 1 length its message cannot have
     cut_short,   // the bytes end before the header or the frame does
   };
   Status status = Status::malformed;
   std::size_t size = 0;
+  std::uint32_t msgid = 0;  // once the header is whole
 };
 FrameCheck check_frame(std::span<const std::uint8_t> bytes);
 

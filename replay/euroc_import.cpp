@@ -16,6 +16,7 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/imu_frame.hpp"
+#include "replay/log_import.hpp"
 #include "replay/position_derivative.hpp"
 
 namespace imubridge::replay {
@@ -84,17 +85,6 @@ std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, Impor
   return rows;
 }
 
-// Whether `si` is beyond what an int16 count of `lsb` holds (Calibration::to_counts then saturates).
-bool beyond_range(const std::array<double, 3>& si, double lsb) {
-  for (double x : si) {
-    const double counts = std::round(x / lsb);
-    if (counts < std::numeric_limits<std::int16_t>::min() || counts > std::numeric_limits<std::int16_t>::max()) {
-      return true;
-    }
-  }
-  return false;
-}
-
 std::string range_text(double lsb, const char* unit) {
   char text[64];
   std::snprintf(text, sizeof text, "beyond +-%g %s, clipped", lsb * std::numeric_limits<std::int16_t>::max(), unit);
@@ -134,6 +124,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
     throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
   }
   const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  check_gap_threshold(options.gap_threshold_s);
   EurocImportResult result;
   result.imu.path = options.dir / "mav0" / "imu0" / "data.csv";
   std::ifstream imu = open_input(result.imu.path);
@@ -158,6 +149,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
                              {"accel_lsb", options.accel_lsb},
                              {"gyro_lsb", options.gyro_lsb}}}};
   std::vector<double> axes_t;  // the rows as read, for the gravity check
+  std::vector<std::int64_t> t_ns;  // and for the holes
   std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
   // The session begins with the first usable row, so a file without one leaves nothing behind. The dataset's
   // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row. The
@@ -187,8 +179,8 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         }
         const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
         const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
-        if (beyond_range(accel, options.accel_lsb)) result.clipped.add(row.line, accel_beyond);
-        if (beyond_range(gyro, options.gyro_lsb)) result.clipped.add(row.line, gyro_beyond);
+        if (beyond_frame_range(accel, options.accel_lsb)) result.clipped.add(row.line, accel_beyond);
+        if (beyond_frame_range(gyro, options.gyro_lsb)) result.clipped.add(row.line, gyro_beyond);
         const std::uint64_t since_t0 = elapsed_ns(t0, row.t_ns);
         bytes.clear();
         protocol::imu::encode({.seq = static_cast<std::uint16_t>(result.imu.rows),
@@ -199,6 +191,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
         ++result.imu.rows;
         last_t = row.t_ns;
         axes_t.push_back(static_cast<double>(since_t0) * 1e-9);
+        t_ns.push_back(row.t_ns);
         axes_accel.emplace_back(accel[0], accel[1], accel[2]);
         axes_gyro.emplace_back(gyro[0], gyro[1], gyro[2]);
         store.commit_if_due(std::chrono::steady_clock::now());
@@ -225,6 +218,8 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
     record_lines(store, result.session, std::nullopt, last_t, "import_skipped", result.reference->path,
                  result.reference->skipped);
   }
+  result.gaps = find_gaps(t_ns, options.gap_threshold_s, t0);
+  append_gap_events(store, result.session, link, result.gaps);
   result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(axes_t, axes_accel, axes_gyro));
   if (result.axes.mismatch) {
     store.append_event(result.session, {.link_id = link,

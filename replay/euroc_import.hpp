@@ -11,6 +11,7 @@
 #include "estimator/imu_axes.hpp"
 #include "protocol/calibration.hpp"
 #include "replay/import_progress.hpp"
+#include "replay/log_import.hpp"
 #include "replay/text_table.hpp"
 #include "store/store.hpp"
 
@@ -38,6 +39,7 @@ struct EurocImportOptions {
   // How the IMU's axes sit in the body (estimator::parse_imu_axes), recorded in the link's config. EuRoC's ADIS16448
   // is mounted x up: "x-up"; "auto" detects it from gravity whenever the session is read.
   std::string imu_axes = "auto";
+  double gap_threshold_s = kDefaultGapThresholdS;  // the IMU stopping for longer is a `gap` event
   // Hears how far reading the IMU file (mav0/imu0/data.csv) is. Optional.
   ImportProgressCallback progress{};
 };
@@ -55,13 +57,15 @@ struct EurocImportResult {
   bool velocity_derived = false;   // the reference had positions only: velocity_from_positions() supplied it
   LinesByReason clipped;           // IMU rows imported with a value clipped to the frame's range
   estimator::AxesResolution axes;  // the declared axes checked against gravity in the imported rows
+  Gaps gaps;                       // holes in the IMU's data
 };
 
 // The calibration imported frames are encoded with: the resolutions, no offsets, IMU axes as in the file. EuRoC has
 // no magnetometer or temperature: their counts are 0 (they decode as 0 uT, 0 C).
 protocol::Calibration import_calibration(double accel_lsb, double gyro_lsb);
 
-// Skipped rows and clipped values are also recorded as events of kind "import_skipped" and "import_clipped", and
+// Skipped rows and clipped values are also recorded as events of kind "import_skipped" and "import_clipped", holes
+// in the IMU's data as "gap" events, and
 // declared axes that gravity contradicts as one of kind "imu_axes_mismatch". Throws std::invalid_argument, before
 // writing anything, when a file is missing or has no usable row, or the IMU axes do not parse.
 EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& options);

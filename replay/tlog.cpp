@@ -12,7 +12,9 @@ namespace mavlink = protocol::mavlink;
 
 struct Probe {
   enum class Kind { valid, cut_short, bad } kind = Kind::bad;
+  std::uint32_t msgid = 0;
   bool verified = false;  // a valid record whose frame's CRC was checked
+  bool other_layout = false;  // a valid record of a known id at a length its message cannot have
   std::size_t size = 0;   // the frame's, as its header gives it (0 when not even that could be read)
   const char* what = "";  // for a bad record
 };
@@ -29,17 +31,19 @@ Probe probe(std::span<const std::uint8_t> bytes, std::size_t at) {
   using Status = mavlink::FrameCheck::Status;
   switch (check.status) {
     case Status::frame:
-      return {Probe::Kind::valid, true, check.size};
+      return {Probe::Kind::valid, check.msgid, true, false, check.size};
     case Status::unverified:
-      return {Probe::Kind::valid, false, check.size};
+      return {Probe::Kind::valid, check.msgid, false, false, check.size};
+    case Status::other_layout:
+      return {Probe::Kind::valid, check.msgid, false, true, check.size};
     case Status::cut_short:
-      return {Probe::Kind::cut_short, false, check.size};
+      return {Probe::Kind::cut_short, check.msgid, false, false, check.size};
     case Status::bad_crc:
-      return {Probe::Kind::bad, false, check.size, "a frame that fails its CRC"};
+      return {Probe::Kind::bad, check.msgid, false, false, check.size, "a frame that fails its CRC"};
     case Status::malformed:
       break;
   }
-  return {Probe::Kind::bad, false, 0, "not a MAVLink frame"};
+  return {Probe::Kind::bad, 0, false, false, 0, "not a MAVLink frame"};
 }
 
 // The next offset from `from` where reading can go on: a record with a checked frame, followed by another valid
@@ -93,6 +97,28 @@ std::optional<std::string> Log::damage_summary() const {
   return text;
 }
 
+std::optional<std::string> Log::unverified_summary() const {
+  if (unverified == 0) return std::nullopt;
+  const auto list = [](const std::map<std::uint32_t, std::uint64_t>& ids) {
+    std::uint64_t total = 0;
+    std::string text;
+    std::size_t shown = 0;
+    for (const auto& [id, n] : ids) {
+      total += n;
+      if (shown++ < 8) text += (text.empty() ? "" : ", ") + std::to_string(id) + ": " + std::to_string(n);
+    }
+    if (ids.size() > 8) text += ", and " + std::to_string(ids.size() - 8) + " more ids";
+    return std::to_string(total) + (total == 1 ? " frame" : " frames") + " (ids " + text + ")";
+  };
+  std::string text;
+  if (!unknown_ids.empty()) text = list(unknown_ids) + " of message ids no dialect here knows";
+  if (!other_layout_ids.empty()) {
+    text += (text.empty() ? "" : "; ") + list(other_layout_ids) +
+            " of known ids at a MAVLink 1 length their message cannot have (another dialect or version)";
+  }
+  return text;
+}
+
 Log parse(std::vector<std::uint8_t> file) {
   if (file.empty()) throw ParseError("not a MAVLink telemetry log (tlog): the file is empty");
   Log log;
@@ -105,7 +131,10 @@ Log parse(std::vector<std::uint8_t> file) {
     if (p.kind == Probe::Kind::valid) {
       const std::uint64_t t = load_time(&bytes[at]);
       log.records.push_back({t, at, p.size});
-      log.unverified += !p.verified;
+      if (!p.verified) {
+        ++log.unverified;
+        ++(p.other_layout ? log.other_layout_ids : log.unknown_ids)[p.msgid];
+      }
       last_us = t;
       at += kTimeSize + p.size;
       continue;

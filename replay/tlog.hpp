@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -39,7 +40,12 @@ struct Log {
   std::vector<std::uint8_t> bytes;  // the file
   std::vector<Record> records;      // every valid record, in file order
   std::vector<Damage> damage;       // in file order
-  std::uint64_t unverified = 0;     // records whose message id is in no dialect known here: kept, but unchecked
+  // Valid frames nothing here can check, kept as they are, by message id: ids in no dialect known here, and MAVLink 1
+  // frames of a known id at a length its message cannot have (another dialect's or version's message of that id).
+  std::map<std::uint32_t, std::uint64_t> unknown_ids, other_layout_ids;
+  std::uint64_t unverified = 0;  // all of them
+  // One line for people: "300 frames of message ids no dialect here knows (11042: 300)"; nothing when there are none.
+  std::optional<std::string> unverified_summary() const;
 
   std::span<const std::uint8_t> frame(const Record& r) const {
     return std::span(bytes).subspan(r.offset + kTimeSize, r.size);

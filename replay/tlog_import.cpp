@@ -188,10 +188,12 @@ class AxesSink final : public pipeline::SessionSink {
   explicit AxesSink(std::int64_t t0_ns) : t0_ns_(t0_ns) {}
   void on_sample(std::size_t, const protocol::Sample& s, std::span<const store::Estimate>, std::int64_t) override {
     t.push_back(static_cast<double>(s.recv_mono_ns - t0_ns_) * 1e-9);
+    t_ns.push_back(s.recv_mono_ns);
     accel.emplace_back(s.accel[0], s.accel[1], s.accel[2]);
     gyro.emplace_back(s.gyro[0], s.gyro[1], s.gyro[2]);
   }
   std::vector<double> t;
+  std::vector<std::int64_t> t_ns;
   std::vector<Eigen::Vector3d> accel, gyro;
 
  private:
@@ -205,6 +207,12 @@ nlohmann::json source_json(const mavlink::ImuSource& s) {
           {"sysid", s.sysid},
           {"compid", s.compid},
           {"id", s.id}};
+}
+
+nlohmann::json by_id(const std::map<std::uint32_t, std::uint64_t>& counts) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [id, n] : counts) j[std::to_string(id)] = n;
+  return j;
 }
 
 nlohmann::json metadata(const tlog::Log& log, const Survey& s, const TlogImportOptions& options,
@@ -232,6 +240,8 @@ nlohmann::json metadata(const tlog::Log& log, const Survey& s, const TlogImportO
             {"last_us", log.records.back().time_us},
             {"messages", s.messages},
             {"unverified", log.unverified},
+            {"unknown_ids", by_id(log.unknown_ids)},
+            {"other_layout_ids", by_id(log.other_layout_ids)},
             {"damage", damage}}}};
 }
 
@@ -242,6 +252,7 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   if (options.accel_lsb.has_value() != options.gyro_lsb.has_value()) {
     throw std::invalid_argument("RAW_IMU needs both resolutions: --accel-lsb and --gyro-lsb");
   }
+  check_gap_threshold(options.gap_threshold_s);
   const bool raw_calibrated = options.accel_lsb.has_value();
   protocol::Calibration calibration;  // for RAW_IMU only; the other IMU messages carry SI-scaled values
   if (raw_calibrated) {
@@ -301,6 +312,7 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   if (reference) result.reference_source = pipeline::MavlinkReference(*reference).source();
   result.records = log.records.size();
   result.unverified = log.unverified;
+  result.unverified_summary = log.unverified_summary();
   result.damage = log.damage_summary();
   result.damaged_bytes = log.damaged_bytes();
   result.first_us = log.records.front().time_us;
@@ -366,8 +378,8 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
       char text[96];
       std::snprintf(text, sizeof text, "no record in the log for %.1f s", gap);
       event(link, i - 1, "log_gap", 1, text);
-      ++result.gaps;
-      result.gap_s += gap;
+      ++result.log_gaps;
+      result.log_gap_s += gap;
     } else if (now < before) {
       char text[160];
       std::snprintf(text, sizeof text,
@@ -396,6 +408,8 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
           file + ": " + std::to_string(d.bytes) + " bytes at byte " + std::to_string(d.offset) + " are no record (" +
               d.what + "); the records around them are imported");
   }
+  result.gaps = find_gaps(samples.t_ns, options.gap_threshold_s, mono_ns.front());
+  append_gap_events(store, result.session, link, result.gaps);
   result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(samples.t, samples.accel, samples.gyro));
   if (result.axes.mismatch) event(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
   pipeline::end_recorded_session(store, result.session, std::max(end_wall, ns(result.first_us)));

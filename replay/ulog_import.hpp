@@ -2,7 +2,7 @@
 // `imubridge import ulog`: a PX4 ULog file as a session of kind "import", as `import euroc` does it: the raw IMU
 // (sensor_combined, else sensor_accel with sensor_gyro) re-encoded as imubridge frames and recorded through the
 // session engine and its LinkRecorder, the vehicle's attitude and local position as the reference trajectory, logged
-// strings and dropouts as events, the parameters and info in the session's config. docs/replay.md, "PX4 ULog".
+// strings, dropouts and holes as events, the parameters and info in the session's config. docs/replay.md, "PX4 ULog".
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -12,6 +12,7 @@
 
 #include "estimator/imu_axes.hpp"
 #include "replay/import_progress.hpp"
+#include "replay/log_import.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::replay {
@@ -23,27 +24,18 @@ struct UlogImportOptions {
   double gyro_lsb = 1.1e-3;      // rad/s per count
   std::string imu_axes = "frd";  // PX4 reports its IMU in the body's FRD axes
   bool reference = true;         // vehicle_attitude + vehicle_local_position into the reference table
+  double gap_threshold_s = kDefaultGapThresholdS;  // the IMU stopping for longer is a `gap` event
   // Hears how far the import is: the file's bytes while it is parsed, then the samples as they are recorded (at
   // bytes_read == bytes_total). Optional.
   ImportProgressCallback progress{};
 };
 
-struct UlogImportResult {
-  std::int64_t session = 0;
-  std::string imu_source;                        // "sensor_combined" or "sensor_accel+sensor_gyro"
-  std::uint64_t samples = 0;                     // IMU samples imported
-  std::map<std::string, std::uint64_t> skipped;  // IMU records not imported, by reason
-  std::uint64_t clipped = 0;                     // samples with a value clipped to the frame's range
-  std::uint64_t reference_rows = 0;
-  std::map<std::string, std::uint64_t> reference_skipped;
+struct UlogImportResult : ImuLogImportResult {
   std::uint64_t log_events = 0;
   std::uint64_t dropouts = 0;
   std::uint64_t dropout_ms = 0;
   bool data_appended = false;
   std::uint64_t appended_messages = 0;
-  std::uint64_t first_us = 0, last_us = 0;  // the first and last sample's ULog timestamps
-  std::optional<std::string> damage;        // the file was read up to damage: what and where
-  estimator::AxesResolution axes;
   // When the vehicle flew, from PX4's land detector (vehicle_land_detected.landed): [takeoff, landing) in ULog µs,
   // a flight still going at the log's end closing at its last record. Unset when the log has no land detector, so
   // whether it flew is unknown (diagnose can still find the flight from the rotors' vibration).

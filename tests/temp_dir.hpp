@@ -2,7 +2,10 @@
 // A fresh directory per test, removed afterwards.
 #include <unistd.h>
 
+#include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <span>
 #include <string>
 #include <system_error>
 
@@ -22,6 +25,13 @@ class TempDir {
   TempDir& operator=(const TempDir&) = delete;
   const std::filesystem::path& path() const { return path_; }
   std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+  // A file `name` in it holding `bytes`; its path.
+  std::filesystem::path write(const std::string& name, std::span<const std::uint8_t> bytes) const {
+    const std::filesystem::path path = path_ / name;
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    return path;
+  }
 
  private:
   std::filesystem::path path_;

@@ -79,12 +79,7 @@ class TlogImport : public ::testing::Test {
  protected:
   test::TempDir dir_;
 
-  fs::path write(const Bytes& bytes, const std::string& name = "flight.tlog") {
-    const fs::path path = dir_ / name;
-    std::ofstream(path, std::ios::binary)
-        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    return path;
-  }
+  fs::path write(const Bytes& bytes, const std::string& name = "flight.tlog") { return dir_.write(name, bytes); }
 };
 
 std::string parse_error(Bytes bytes) {
@@ -180,6 +175,45 @@ TEST(TlogReader, ADamagedRecordInTheMiddleIsSkippedAndReadingGoesOn) {
   EXPECT_TRUE(summary.starts_with("2 damaged stretches, " + std::to_string(log.damaged_bytes()) + " bytes: "))
       << summary;
   EXPECT_NE(summary.find("at byte " + std::to_string(hit.offset) + " (after record 40)"), std::string::npos) << summary;
+}
+
+// Well-formed frames nothing here can check are records, not damage: a MAVLink 2 frame of an id in no dialect known
+// here, and a MAVLink 1 frame of a known id (ATTITUDE, 28 bytes) at a length its message cannot have (another
+// dialect's or an older version's message of that id). Each is counted by id and said to be what it is.
+TEST_F(TlogImport, ValidFramesOfUnknownIdsAndLayoutsAreCountedAsSuchNotAsDamage) {
+  std::uint8_t seq = 0;
+  const Flight f = fly(1.0, [&](const sim::SimSample&, sim::MavlinkTelemetry&, std::vector<Bytes>& frames) {
+    if (seq % 10 == 0) {
+      Bytes unknown, old;
+      mav::encode(mav::make_message(42424, Bytes(12, 7), {.seq = seq, .sysid = 1, .compid = 191}), unknown);
+      mav::encode(mav::make_message(30, Bytes(20, 3), {.version = 1, .seq = seq, .sysid = 1, .compid = 192}), old);
+      frames.push_back(unknown);
+      frames.push_back(old);
+    }
+    ++seq;
+  });
+  const std::uint64_t each = (f.samples.size() + 9) / 10;
+  const tlog::Log log = tlog::parse(f.tlog);
+  EXPECT_TRUE(log.damage.empty());
+  EXPECT_EQ(log.records.size(), f.records);
+  EXPECT_EQ(log.unknown_ids, (std::map<std::uint32_t, std::uint64_t>{{42424, each}}));
+  EXPECT_EQ(log.other_layout_ids, (std::map<std::uint32_t, std::uint64_t>{{30, each}}));
+  EXPECT_EQ(log.unverified, 2 * each);
+  const std::string n = std::to_string(each);
+  EXPECT_EQ(log.unverified_summary().value(),
+            n + " frames (ids 42424: " + n + ") of message ids no dialect here knows; " + n + " frames (ids 30: " + n +
+                ") of known ids at a MAVLink 1 length their message cannot have (another dialect or version)");
+
+  store::Store store(dir_ / "import.db");
+  const auto r = import_tlog(store, {.file = write(f.tlog)});
+  EXPECT_FALSE(r.damage);
+  EXPECT_EQ(r.unverified, 2 * each);
+  EXPECT_EQ(r.unverified_summary, log.unverified_summary());
+  EXPECT_EQ(r.samples, f.samples.size());
+  EXPECT_TRUE(stored_events(store, r.session, "import_damaged").empty());
+  const auto c = session_config(store, r.session).at("import");
+  EXPECT_EQ(c.at("unknown_ids").at("42424"), each);
+  EXPECT_EQ(c.at("other_layout_ids").at("30"), each);
 }
 
 // The flight through the import: every HIGHRES_IMU a sample with the values sent, ATTITUDE with
@@ -367,8 +401,8 @@ TEST_F(TlogImport, GapsStepsBackAndStatusTextAreEvents) {
   }
   store::Store store(dir_ / "import.db");
   const auto r = import_tlog(store, {.file = write(bytes)});
-  EXPECT_EQ(r.gaps, 1u);
-  EXPECT_NEAR(r.gap_s, 3 + static_cast<double>(log.records[100].time_us - log.records[99].time_us) * 1e-6, 1e-9);
+  EXPECT_EQ(r.log_gaps, 1u);
+  EXPECT_NEAR(r.log_gap_s, 3 + static_cast<double>(log.records[100].time_us - log.records[99].time_us) * 1e-6, 1e-9);
   EXPECT_EQ(r.time_back, 1u);
   EXPECT_EQ(r.log_events, 1u);
   const auto log_events = stored_events(store, r.session, "log");
@@ -377,6 +411,13 @@ TEST_F(TlogImport, GapsStepsBackAndStatusTextAreEvents) {
   const auto gap = stored_events(store, r.session, "log_gap");
   ASSERT_EQ(gap.size(), 1u);
   EXPECT_EQ(gap[0].detail, "no record in the log for 3.0 s");
+  // The IMU's samples stop for the same 3 s: a hole in the data, with its span in session time.
+  ASSERT_EQ(r.gaps.holes.size(), 1u);
+  EXPECT_NEAR(r.gaps.holes[0].seconds(), 3, 0.05);
+  const auto hole = stored_events(store, r.session, "gap");
+  ASSERT_EQ(hole.size(), 1u);
+  EXPECT_EQ(hole[0].mono_ns, r.gaps.holes[0].from_ns);
+  EXPECT_TRUE(hole[0].detail.starts_with("no IMU sample for 3.0")) << hole[0].detail;
   ASSERT_EQ(stored_events(store, r.session, "log_time_back").size(), 1u);
   const auto s = stored_samples(store, r.session);
   for (std::size_t i = 1; i < s.size(); ++i) ASSERT_GE(s[i].recv_mono_ns, s[i - 1].recv_mono_ns) << i;

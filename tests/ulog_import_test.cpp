@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -375,6 +376,31 @@ const Expected kLogs[] = {
      "CUBEPILOT_CUBEORANGE", 13014, 0, 1, 22673775, 23822439},
 };
 // clang-format on
+
+// A real PX4 log in which every topic stops for about 37 s (43 to 80 s) with no dropout message: the hole is a gap
+// event with its span, and the samples on either side are all imported.
+TEST_F(UlogImport, AHoleInARealLogIsAGapEvent) {
+  const fs::path path = kShared / "x500v2_unregistered_msg_id.ulg";
+  if (!fs::exists(path)) GTEST_SKIP() << "no " << path << " (it is in ../shared only)";
+  store::Store store(dir_ / "x500.db");
+  const auto r = import_ulog(store, {.file = path});
+  EXPECT_EQ(r.dropouts, 0u);
+  ASSERT_EQ(r.gaps.holes.size(), 1u);
+  const Gap& hole = r.gaps.holes[0];
+  const double from_s = static_cast<double>(hole.from_ns - r.gaps.session_start_ns) * 1e-9;
+  const double to_s = static_cast<double>(hole.to_ns - r.gaps.session_start_ns) * 1e-9;
+  EXPECT_GT(from_s, 40);
+  EXPECT_LT(from_s, 46);
+  EXPECT_GT(to_s, 77);
+  EXPECT_LT(to_s, 83);
+  EXPECT_GT(hole.seconds(), 34);
+  const auto gap = stored_events(store, r.session, "gap");
+  ASSERT_EQ(gap.size(), 1u);
+  EXPECT_EQ(gap[0].mono_ns, hole.from_ns);
+  EXPECT_TRUE(gap[0].detail.starts_with("no IMU sample for 3")) << gap[0].detail;
+  const auto s = stored_samples(store, r.session);
+  EXPECT_TRUE(std::any_of(s.begin(), s.end(), [&](const protocol::Sample& x) { return x.recv_mono_ns > hole.from_ns; }));
+}
 
 TEST_F(UlogImport, ThePx4SampleLogs) {
   std::size_t imported = 0;

@@ -1,0 +1,212 @@
+#include "replay/log_import.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+
+#include "pipeline/record_and_decode.hpp"
+#include "pipeline/recorded_session.hpp"
+#include "pipeline/session_engine.hpp"
+#include "protocol/imu_frame.hpp"
+#include "replay/euroc_import.hpp"
+
+namespace imubridge::replay {
+namespace {
+
+std::int64_t ns(std::uint64_t us) { return static_cast<std::int64_t>(us) * 1000; }
+
+}  // namespace
+
+double Gaps::seconds() const {
+  double total = 0;
+  for (const Gap& g : holes) total += g.seconds();
+  return total;
+}
+
+void check_gap_threshold(double threshold_s) {
+  if (!(threshold_s > 0) || !std::isfinite(threshold_s)) {
+    throw std::invalid_argument("--gap-threshold must be a positive number of seconds");
+  }
+}
+
+Gaps find_gaps(std::span<const std::int64_t> t_ns, double threshold_s, std::int64_t session_start_ns) {
+  check_gap_threshold(threshold_s);
+  Gaps gaps{.threshold_s = threshold_s, .session_start_ns = session_start_ns};
+  for (std::size_t i = 1; i < t_ns.size(); ++i) {
+    if (static_cast<double>(t_ns[i] - t_ns[i - 1]) * 1e-9 > threshold_s) gaps.holes.push_back({t_ns[i - 1], t_ns[i]});
+  }
+  return gaps;
+}
+
+void append_gap_events(store::Store& store, std::int64_t session, std::int64_t link, const Gaps& gaps) {
+  for (const Gap& g : gaps.holes) {
+    char text[160];
+    std::snprintf(text, sizeof text, "no IMU sample for %.3f s, from %.3f s to %.3f s of the session (over %g s)",
+                  g.seconds(), static_cast<double>(g.from_ns - gaps.session_start_ns) * 1e-9,
+                  static_cast<double>(g.to_ns - gaps.session_start_ns) * 1e-9, gaps.threshold_s);
+    store.append_event(session,
+                       {.link_id = link, .mono_ns = g.from_ns, .wall_ns = g.from_ns, .kind = "gap", .detail = text});
+  }
+}
+
+bool finite(const std::array<double, 3>& v) {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+bool beyond_frame_range(const std::array<double, 3>& si, double lsb) {
+  for (double x : si) {
+    const double counts = std::round(x / lsb);
+    if (counts < std::numeric_limits<std::int16_t>::min() || counts > std::numeric_limits<std::int16_t>::max()) {
+      return true;
+    }
+  }
+  return false;
+}
+
+void append_in_order(const ImuRow& row, std::vector<ImuRow>& rows, std::map<std::string, std::uint64_t>& skipped) {
+  if (!rows.empty() && row.t_us <= rows.back().t_us) {
+    ++skipped["timestamp not after the previous sample's"];
+  } else {
+    rows.push_back(row);
+  }
+}
+
+std::vector<ImuRow> pair_accel_with_gyro(const std::vector<TimedVector>& accel, const std::vector<TimedVector>& gyro,
+                                         std::map<std::string, std::uint64_t>& skipped) {
+  std::vector<ImuRow> rows;
+  std::size_t k = 0;
+  for (const auto& [t, g] : gyro) {
+    ImuRow row{.t_us = t, .gyro = g};
+    while (k + 1 < accel.size() && accel[k + 1].first < t) ++k;
+    if (accel.size() < 2 || t < accel[k].first || k + 1 >= accel.size() || accel[k + 1].first < t ||
+        accel[k + 1].first - accel[k].first > kMaxAccelGapUs) {
+      ++skipped["no accelerometer samples around it"];
+      continue;
+    }
+    const double f = static_cast<double>(t - accel[k].first) / static_cast<double>(accel[k + 1].first - accel[k].first);
+    for (int j = 0; j < 3; ++j) row.accel[j] = accel[k].second[j] + f * (accel[k + 1].second[j] - accel[k].second[j]);
+    if (!finite(row.gyro)) {
+      ++skipped["not a finite number"];
+    } else {
+      append_in_order(row, rows, skipped);
+    }
+  }
+  return rows;
+}
+
+void AttitudeSeries::add(std::uint64_t t_us, const Eigen::Quaterniond& q,
+                         std::map<std::string, std::uint64_t>& skipped) {
+  if (!(std::abs(q.norm() - 1) <= 1e-2)) {
+    ++skipped["attitude quaternion not of unit length"];
+  } else if (samples_.empty() || t_us > samples_.back().first) {
+    samples_.emplace_back(t_us, q.normalized());
+  }
+}
+
+std::optional<Eigen::Quaterniond> AttitudeSeries::at(std::uint64_t t) {
+  if (samples_.empty()) return std::nullopt;
+  if (k_ >= samples_.size() || samples_[k_].first > t) k_ = 0;
+  while (k_ + 1 < samples_.size() && samples_[k_ + 1].first <= t) ++k_;
+  const auto& [t0, q0] = samples_[k_];
+  if (t0 == t) return q0;
+  if (t < t0 || k_ + 1 >= samples_.size()) return std::nullopt;
+  const auto& [t1, q1] = samples_[k_ + 1];
+  if (t1 - t0 > kMaxAttitudeGapUs) return std::nullopt;
+  return q0.slerp(static_cast<double>(t - t0) / static_cast<double>(t1 - t0), q1);
+}
+
+Eigen::Quaterniond attitude_from_euler(double roll, double pitch, double yaw) {
+  return Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX());
+}
+
+void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result) {
+  const auto calibration = import_calibration(settings.accel_lsb, settings.gyro_lsb);
+  const std::vector<ImuRow>& rows = log.rows;
+  result.imu_source = log.imu_source;
+  result.skipped = std::move(log.skipped);
+  result.reference_skipped = std::move(log.reference_skipped);
+  result.reference_rows = log.reference.size();
+  result.damage = log.damage;
+  result.first_us = rows.front().t_us;
+  result.last_us = rows.back().t_us;
+
+  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+      store, {.kind = "import", .source = log.source, .config = log.config, .started_wall_ns = ns(result.first_us)},
+      {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, settings.imu_axes}, .device = log.device}});
+  result.session = recorded.id;
+  const std::int64_t link = recorded.store_links[0];
+  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+  pipeline::SessionEngine engine(nullptr);
+
+  std::vector<std::uint8_t> bytes;
+  std::vector<double> axes_t;
+  std::vector<std::int64_t> t_ns;
+  std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
+  const auto progress = [&] {
+    settings.progress({.bytes_read = settings.file_size, .bytes_total = settings.file_size, .samples = result.samples});
+  };
+  for (const ImuRow& row : rows) {
+    if (beyond_frame_range(row.accel, settings.accel_lsb) || beyond_frame_range(row.gyro, settings.gyro_lsb)) {
+      ++result.clipped;
+    }
+    bytes.clear();
+    protocol::imu::encode({.seq = static_cast<std::uint16_t>(result.samples),
+                           .device_time_us = row.t_us,
+                           .payload = calibration.to_counts(row.accel, row.gyro, {}, 0.0)},
+                          bytes);
+    engine.on_chunk(0, recording, bytes, ns(row.t_us), ns(row.t_us));
+    ++result.samples;
+    t_ns.push_back(ns(row.t_us));
+    axes_t.push_back(static_cast<double>(row.t_us - result.first_us) * 1e-6);
+    axes_accel.emplace_back(row.accel[0], row.accel[1], row.accel[2]);
+    axes_gyro.emplace_back(row.gyro[0], row.gyro[1], row.gyro[2]);
+    store.commit_if_due(std::chrono::steady_clock::now());
+    if (settings.progress && result.samples % kImportProgressEvery == 0) progress();
+  }
+  if (settings.progress) progress();
+  const std::int64_t last = ns(result.last_us);
+  std::int64_t end = last;
+  engine.finish_link(0, recording, end, end);
+  engine.finish();
+  for (const auto& row : log.reference) store.append_reference(result.session, row);
+
+  const auto event = [&](std::optional<std::int64_t> on, std::int64_t t, std::string kind, std::int64_t count,
+                         std::string detail) {
+    store.append_event(result.session, {.link_id = on,
+                                        .mono_ns = t,
+                                        .wall_ns = t,
+                                        .kind = std::move(kind),
+                                        .count = count,
+                                        .detail = std::move(detail)});
+    end = std::max(end, t);
+  };
+  for (LogEvent& e : log.events) event(std::nullopt, ns(e.t_us), std::move(e.kind), 1, std::move(e.detail));
+  for (const auto& [reason, count] : result.skipped) {
+    event(link, last, "import_skipped", static_cast<std::int64_t>(count),
+          log.file + ": " + std::to_string(count) + " " + result.imu_source + " records: " + reason);
+  }
+  for (const auto& [reason, count] : result.reference_skipped) {
+    event(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
+          log.file + ": " + std::to_string(count) + " reference rows: " + reason);
+  }
+  if (result.clipped > 0) {
+    event(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
+          log.file + ": " + std::to_string(result.clipped) + " samples beyond the frames' range, clipped");
+  }
+  if (log.damage) {
+    event(std::nullopt, last, "import_damaged", 1,
+          log.file + ": read up to the damage, " + *log.damage + "; everything before it is imported");
+  }
+  result.gaps = find_gaps(t_ns, settings.gap_threshold_s, t_ns.front());
+  append_gap_events(store, result.session, link, result.gaps);
+  result.axes = estimator::resolve_axes(settings.declared_axes, estimator::detect_up(axes_t, axes_accel, axes_gyro));
+  if (result.axes.mismatch) event(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
+  pipeline::end_recorded_session(store, result.session, end);
+}
+
+}  // namespace imubridge::replay
