@@ -195,7 +195,6 @@ int run(const DiagnoseCliOptions& o) {
   pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
   const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
-  print_reference_delay(session);
   if (!options.velocity)
     options.velocity = session.series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
   std::tie(options.train, options.validate) = o.windows.resolve(session);
@@ -212,6 +211,7 @@ int run(const DiagnoseCliOptions& o) {
   std::filesystem::create_directories(dir);
   dg::write_report_json(diagnosis, dir / "report.json");
   dg::write_report_html(diagnosis, dir);
+  print_reference_delay(session);  // with the summary: an error before it stays one line
   print_summary(diagnosis, o.report);
   diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
   if (o.out) {

@@ -46,7 +46,6 @@ int run(const EvaluateCliOptions& o) {
   set_reference_delay(reading, o.reference_delay);
   const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  print_reference_delay(session);
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
@@ -85,6 +84,7 @@ int run(const EvaluateCliOptions& o) {
     report["linear_least_squares"] = {
         {"train_window", {train.start, train.end}}, {"k", {b.k.x(), b.k.y()}}, {"b", {b.b.x(), b.b.y()}}};
   }
+  print_reference_delay(session);  // once scored: an error before it stays one line
   std::printf("%s\n", report.dump(2).c_str());
   return 0;
 }
