@@ -342,8 +342,11 @@ ReferenceAlignment align_reference_frame(const ImuSeries& series, const Matrix3d
   while (a + 1 < series.size()) {
     std::size_t b = a;
     Quaterniond gyro = Quaterniond::Identity();
+    bool gap = false;
     while (b + 1 < series.size() && series.t[b] - series.t[a] < kAlignSpanSeconds) {
       const double dt = series.t[b + 1] - series.t[b];
+      // A gap in the samples (a logger's dropout): the gyro did not see that rotation, so the span says nothing.
+      gap = gap || dt > kAlignSpanSeconds;
       const Vector3d w = 0.5 * (series.gyro[b] + series.gyro[b + 1]) * dt;
       const double angle = w.norm();
       gyro = gyro * (angle > 0.0 ? Quaterniond(Eigen::AngleAxisd(angle, w / angle)) : Quaterniond::Identity());
@@ -352,7 +355,8 @@ ReferenceAlignment align_reference_frame(const ImuSeries& series, const Matrix3d
     if (series.t[b] - series.t[a] < kAlignSpanSeconds) break;
     const Vector3d r_ref = log_rotation(q[a].conjugate() * q[b]);
     const Vector3d r_imu = log_rotation(gyro);
-    if (r_ref.norm() > kAlignMinSpanAngle && r_imu.norm() > kAlignMinSpanAngle) pairs.emplace_back(r_ref, r_imu);
+    if (!gap && r_ref.norm() > kAlignMinSpanAngle && r_imu.norm() > kAlignMinSpanAngle)
+      pairs.emplace_back(r_ref, r_imu);
     a = b;
   }
   out.spans = pairs.size();

@@ -197,7 +197,17 @@ void apply_reference_delay(SessionSeries& out, const Reference& reference, const
     out.reference_delay = estimator::estimate_reference_delay(series, pose_t, reference.velocity);
     const estimator::ReferenceDelay& d = *out.reference_delay;
     out.reference_delay_line = "reference delay: " + estimator::describe(d);
-    if (d.usable()) {
+    // Less than one IMU sample of delay changes no pairing worth the samples a shift drops at the ends.
+    std::vector<double> steps(series.t.size() > 1 ? series.t.size() - 1 : 0);
+    for (std::size_t k = 0; k < steps.size(); ++k) steps[k] = series.t[k + 1] - series.t[k];
+    std::nth_element(steps.begin(), steps.begin() + static_cast<long>(steps.size() / 2), steps.end());
+    const double sample_period = steps.empty() ? 0.0 : steps[steps.size() / 2];
+    if (d.usable() && std::abs(d.delay_s) < sample_period) {
+      char line[120];
+      std::snprintf(line, sizeof line, ", less than one IMU sample (%.3f s): the reference is not shifted",
+                    sample_period);
+      out.reference_delay_line += line;
+    } else if (d.usable()) {
       out.reference_shift_s = d.delay_s;
       out.reference_delay_line += ", the reference is shifted by it";
     } else {

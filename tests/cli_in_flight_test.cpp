@@ -61,7 +61,7 @@ TEST_F(InFlight, PercentagesAreOfTheLandDetectorsFlightAtBothEnds) {
   EXPECT_NEAR(id.validation_windows.at(0).end, 50.0, 0.01);
 }
 
-// A real PX4 flight whose land detector says 4.6-85.8 s of the log (SOURCE.md beside it).
+// A real PX4 flight whose land detector says 3.0-84.2 s from its first sample (../shared/data/ulog/SOURCE.md).
 TEST_F(InFlight, ARealUlogFlightTakesItsLandDetectorsSpan) {
   const fs::path ulog = fs::path(IMUBRIDGE_SOURCE_DIR) / "../shared/data/ulog/x500v2_unregistered_msg_id.ulg";
   if (!fs::exists(ulog)) GTEST_SKIP() << "no " << ulog << " (../shared/data/ulog/SOURCE.md)";

@@ -275,6 +275,24 @@ ImuSeries yawing_flight() {
   return s;
 }
 
+TEST(ImuAxesReference, ALoggersGapIsLeftOutNotTakenForARotation) {
+  // 10 s without samples (every topic of a log stops, as in the X500 flight): the reference turned, the gyro saw none.
+  const ImuSeries& whole = paper_flight();
+  ImuSeries gapped;
+  gapped.reference.emplace();
+  for (std::size_t k = 0; k < whole.size(); ++k) {
+    if (whole.t[k] >= 10.0 && whole.t[k] < 20.0) continue;
+    gapped.t.push_back(whole.t[k]);
+    gapped.gyro.push_back(whole.gyro[k]);
+    gapped.accel.push_back(whole.accel[k]);
+    gapped.reference->attitude.push_back(whole.reference->attitude[k]);
+    gapped.reference->velocity_ned.push_back(whole.reference->velocity_ned[k]);
+  }
+  const ReferenceAlignment a = align_reference_frame(gapped, Matrix3d::Identity());
+  EXPECT_EQ(a.frame, ReferenceFrame::imu) << describe(a);
+  EXPECT_LT(a.misfit_as_imu_rad, 0.01) << describe(a);
+}
+
 TEST(ImuAxesReference, AYawOnlyFlightStillTellsAnUpsideDownImuFromTheBody) {
   // Strapped on z up: the gyro reads the yaw with the opposite sign, which only the body's frame explains.
   const Matrix3d flu = parse_imu_axes("flu").imu_to_body;

@@ -246,7 +246,6 @@ int run(const DiagnoseCliOptions& o) {
   pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
   const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
-  print_reference_delay(session);
   if (!options.velocity)
     options.velocity = session.series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
   std::tie(options.train, options.validate) = o.windows.resolve(session);
@@ -260,6 +259,7 @@ int run(const DiagnoseCliOptions& o) {
   diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
 
   diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
+  print_reference_delay(session);  // with the summary: an error before it stays one line
   print_summary(diagnosis);
   if (o.report) {
     const std::filesystem::path dir(*o.report);

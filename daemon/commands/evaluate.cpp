@@ -45,7 +45,6 @@ int run(const EvaluateCliOptions& o) {
   set_reference_delay(reading, o.reference_delay);
   const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  print_reference_delay(session);
   std::string left;
   const est::ModelParams params =
       est::for_flight(est::load_params(o.params), est::flight_identity(session.series), &left);
@@ -90,6 +89,7 @@ int run(const EvaluateCliOptions& o) {
     report["linear_least_squares"] = {
         {"train_window", {train.start, train.end}}, {"k", {b.k.x(), b.k.y()}}, {"b", {b.b.x(), b.b.y()}}};
   }
+  print_reference_delay(session);  // once scored: an error before it stays one line
   std::printf("%s\n", report.dump(2).c_str());
   return 0;
 }

@@ -179,7 +179,6 @@ int run(const IdentifyCliOptions& o) {
   set_reference_delay(reading, o.reference_delay);
   const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  print_reference_delay(session);
   if (!o.velocity)
     options.velocity = session.series.reference ? est::VelocitySource::reference : est::VelocitySource::filter;
   if (options.velocity == est::VelocitySource::filter && options.method != est::Method::lm)
@@ -204,6 +203,7 @@ int run(const IdentifyCliOptions& o) {
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
+  print_reference_delay(session);  // with the summary: an error before it stays one line
   print_summary(o, result, options.velocity, session.link_id, wall);
   if (options.velocity == est::VelocitySource::eq12) {
     if (const auto drift = est::eq12_drift_warning(session.series, result.params.full.mounting,
