@@ -29,14 +29,15 @@ std::string with_needed(const std::string& effect, const std::vector<std::string
 // specific-force residual beside it, and the effects added. The report's summary and the command's stderr share it.
 std::string summary_line(const Diagnosis& diagnosis);
 
-// report_json(), indented, to `file`. Throws std::invalid_argument when the file cannot be written.
+// report_json(), indented, to `file`, whole or not at all. Throws std::runtime_error when the file cannot be
+// written, leaving an earlier one as it was.
 void write_report_json(const Diagnosis& diagnosis, const std::filesystem::path& file);
 
 // dir/report.html, one self-contained page (no network, no script): the summary, the model search step by step,
 // what is left unexplained, the final parameters, the candidates of each step, and plots drawn by gnuplot and
 // inlined as SVG (measured vs model before and after, residual over time, residual spectrum, convergence of each
 // fit). Without gnuplot the page has the tables and a note, and a warning is logged: a report without plots is
-// still a report. Creates `dir` if needed; throws std::invalid_argument when the page cannot be written.
+// still a report. Creates `dir` if needed; throws std::runtime_error when the page cannot be written.
 void write_report_html(const Diagnosis& diagnosis, const std::filesystem::path& dir);
 
 }  // namespace imubridge::diagnose

@@ -22,7 +22,8 @@ std::string axis_name(const Diagnosis& d, std::size_t index);
 const ResidualAnalysis* analysis_for(const Diagnosis& d, const std::vector<ResidualAnalysis>& residuals,
                                      const std::string& axis);
 std::string join(const std::vector<std::string>& items, std::string_view separator);
-// Throws std::invalid_argument when `file` cannot be written.
+// `text` as the whole of `file`, or nothing (fileio::write_whole_file). Throws std::runtime_error when it cannot
+// be written.
 void write_text(const std::filesystem::path& file, const std::string& text);
 
 // The figure's title and caption are the page's (plain text, escaped there), so the legend can sit on top.

@@ -163,7 +163,8 @@ const char* describe_export_time(ExportTime time) {
 void export_table(const store::Store& store, std::int64_t session, ExportTable table, std::optional<std::int64_t> run,
                   ExportFormat format, ExportTime time, std::ostream& out) {
   find_session(store, session);
-  if (format == ExportFormat::mcap) throw std::logic_error("export_table writes CSV or JSON Lines; MCAP is export_mcap");
+  if (format == ExportFormat::mcap)
+    throw std::logic_error("export_table writes CSV or JSON Lines; MCAP is export_mcap");
   if (run && table != ExportTable::estimates) throw std::invalid_argument("--run selects estimates only");
   // Before any output: these may fail.
   const std::optional<std::int64_t> chosen =
@@ -174,11 +175,10 @@ void export_table(const store::Store& store, std::int64_t session, ExportTable t
   switch (table) {
     case ExportTable::samples: {
       RowWriter w(format, out,
-                  recorded ? std::vector<const char*>{"link_id", "seq", "device_time_us", "recv_mono_ns", "ax",
-                                                                "ay", "az", "gx", "gy", "gz", "mx", "my", "mz",
-                                                                "temperature_c"}
-                           : std::vector<const char*>{"link_id", "seq", "session_t_s", "ax", "ay", "az", "gx",
-                                                                "gy", "gz", "mx", "my", "mz", "temperature_c"});
+                  recorded ? std::vector<const char*>{"link_id", "seq", "device_time_us", "recv_mono_ns", "ax", "ay",
+                                                      "az", "gx", "gy", "gz", "mx", "my", "mz", "temperature_c"}
+                           : std::vector<const char*>{"link_id", "seq", "session_t_s", "ax", "ay", "az", "gx", "gy",
+                                                      "gz", "mx", "my", "mz", "temperature_c"});
       store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) {
         const Value m[] = {optional_real(s.has_mag, s.mag[0]), optional_real(s.has_mag, s.mag[1]),
                            optional_real(s.has_mag, s.mag[2]), optional_real(s.has_temperature, s.temperature_c)};
@@ -193,9 +193,9 @@ void export_table(const store::Store& store, std::int64_t session, ExportTable t
       break;
     }
     case ExportTable::estimates: {
-      RowWriter w(format, out,
-                  {"link_id", "seq", recorded ? "device_t_s" : "session_t_s", "fx", "fy", "vx", "vy", "var_vx",
-                   "var_vy"});
+      RowWriter w(
+          format, out,
+          {"link_id", "seq", recorded ? "device_t_s" : "session_t_s", "fx", "fy", "vx", "vy", "var_vx", "var_vy"});
       store.for_each_estimate(*chosen, [&](const store::Estimate& e) {
         w.row({e.link_id, e.seq, recorded ? e.t_s : seconds(clock->estimate_ns(e.link_id, e.t_s)), e.fx, e.fy, e.vx,
                e.vy, e.var_vx, e.var_vy});
@@ -217,10 +217,8 @@ void export_table(const store::Store& store, std::int64_t session, ExportTable t
     }
     case ExportTable::events: {
       RowWriter w(format, out,
-                  recorded ? std::vector<const char*>{"link_id", "mono_ns", "wall_ns", "kind", "count",
-                                                                "detail"}
-                           : std::vector<const char*>{"link_id", "session_t_s", "wall_ns", "kind", "count",
-                                                                "detail"});
+                  recorded ? std::vector<const char*>{"link_id", "mono_ns", "wall_ns", "kind", "count", "detail"}
+                           : std::vector<const char*>{"link_id", "session_t_s", "wall_ns", "kind", "count", "detail"});
       for (const auto& e : store.events(session)) {
         w.row({e.link_id ? Value(*e.link_id) : Value(nullptr),
                recorded ? Value(e.mono_ns) : Value(seconds(clock->mono_ns(e.mono_ns))), e.wall_ns, e.kind, e.count,
@@ -247,19 +245,35 @@ std::string object_schema(const std::vector<std::pair<std::string_view, std::str
 }
 
 const std::string& sample_schema() {
-  static const std::string schema = object_schema(
-      {{"session_t_s", kNumber}, {"link_id", R"({"type":"integer"})"}, {"seq", R"({"type":"integer"})"},
-       {"device_time_us", R"({"type":"integer"})"}, {"recv_mono_ns", R"({"type":"integer"})"}, {"ax", kNumber},
-       {"ay", kNumber}, {"az", kNumber}, {"gx", kNumber}, {"gy", kNumber}, {"gz", kNumber}, {"mx", kNumber},
-       {"my", kNumber}, {"mz", kNumber}, {"temperature_c", kNumber}});
+  static const std::string schema = object_schema({{"session_t_s", kNumber},
+                                                   {"link_id", R"({"type":"integer"})"},
+                                                   {"seq", R"({"type":"integer"})"},
+                                                   {"device_time_us", R"({"type":"integer"})"},
+                                                   {"recv_mono_ns", R"({"type":"integer"})"},
+                                                   {"ax", kNumber},
+                                                   {"ay", kNumber},
+                                                   {"az", kNumber},
+                                                   {"gx", kNumber},
+                                                   {"gy", kNumber},
+                                                   {"gz", kNumber},
+                                                   {"mx", kNumber},
+                                                   {"my", kNumber},
+                                                   {"mz", kNumber},
+                                                   {"temperature_c", kNumber}});
   return schema;
 }
 
 const std::string& estimate_schema() {
-  static const std::string schema = object_schema(
-      {{"session_t_s", kNumber}, {"link_id", R"({"type":"integer"})"}, {"seq", R"({"type":"integer"})"},
-       {"device_t_s", kNumber}, {"fx", kNumber}, {"fy", kNumber}, {"vx", kNumber}, {"vy", kNumber},
-       {"var_vx", kNumber}, {"var_vy", kNumber}});
+  static const std::string schema = object_schema({{"session_t_s", kNumber},
+                                                   {"link_id", R"({"type":"integer"})"},
+                                                   {"seq", R"({"type":"integer"})"},
+                                                   {"device_t_s", kNumber},
+                                                   {"fx", kNumber},
+                                                   {"fy", kNumber},
+                                                   {"vx", kNumber},
+                                                   {"vy", kNumber},
+                                                   {"var_vx", kNumber},
+                                                   {"var_vy", kNumber}});
   return schema;
 }
 
@@ -272,8 +286,8 @@ const std::string& velocity_schema() {
   return schema;
 }
 
-constexpr std::string_view kTimeSchema =
-    R"({"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}})";
+constexpr std::string_view kTimeSchema = R"({"type":"object","properties":{"sec":{"type":"integer","minimum":0},)"
+                                         R"("nsec":{"type":"integer","minimum":0,"maximum":999999999}}})";
 
 const std::string& pose_in_frame_schema() {
   static const std::string schema = [] {
@@ -288,7 +302,8 @@ const std::string& pose_in_frame_schema() {
 const std::string& log_schema() {
   static const std::string schema = object_schema(
       {{"timestamp", kTimeSchema},
-       {"level", R"({"type":"integer","enum":[0,1,2,3,4,5],"description":"UNKNOWN, DEBUG, INFO, WARNING, ERROR, FATAL"})"},
+       {"level",
+        R"({"type":"integer","enum":[0,1,2,3,4,5],"description":"UNKNOWN, DEBUG, INFO, WARNING, ERROR, FATAL"})"},
        {"message", R"({"type":"string"})"},
        {"name", R"({"type":"string"})"},
        {"file", R"({"type":"string"})"},
@@ -390,8 +405,8 @@ McapCounts export_mcap(const store::Store& store, std::int64_t session, std::opt
                              {"my", optional_number(s.has_mag, s.mag[1])},
                              {"mz", optional_number(s.has_mag, s.mag[2])},
                              {"temperature_c", optional_number(s.has_temperature, s.temperature_c)}};
-    const auto channel =
-        channels.get("/" + link_name(s.link_id) + "/imu", "imubridge.ImuSample", sample_schema(), link_metadata(s.link_id));
+    const auto channel = channels.get("/" + link_name(s.link_id) + "/imu", "imubridge.ImuSample", sample_schema(),
+                                      link_metadata(s.link_id));
     writer.write(channel, device_log_time(t), json_text(j));
     ++counts.samples;
   });
@@ -399,9 +414,15 @@ McapCounts export_mcap(const store::Store& store, std::int64_t session, std::opt
   if (chosen) {
     store.for_each_estimate(*chosen, [&](const store::Estimate& e) {
       const std::int64_t t = clock.estimate_ns(e.link_id, e.t_s);
-      nlohmann::ordered_json j{{"session_t_s", seconds(t)}, {"link_id", e.link_id}, {"seq", e.seq},
-                               {"device_t_s", e.t_s},       {"fx", e.fx},         {"fy", e.fy},
-                               {"vx", e.vx},                {"vy", e.vy},         {"var_vx", e.var_vx},
+      nlohmann::ordered_json j{{"session_t_s", seconds(t)},
+                               {"link_id", e.link_id},
+                               {"seq", e.seq},
+                               {"device_t_s", e.t_s},
+                               {"fx", e.fx},
+                               {"fy", e.fy},
+                               {"vx", e.vx},
+                               {"vy", e.vy},
+                               {"var_vx", e.var_vx},
                                {"var_vy", e.var_vy}};
       auto metadata = link_metadata(e.link_id);
       metadata["run_id"] = std::to_string(*chosen);
@@ -417,14 +438,14 @@ McapCounts export_mcap(const store::Store& store, std::int64_t session, std::opt
     const double session_t_s = seconds(clock.mono_ns(r.t_ns));
     const auto& p = r.position;
     const auto& q = r.quat_wxyz;
-    nlohmann::ordered_json pose{
-        {"timestamp", time_json(time)},
-        {"frame_id", "reference"},
-        {"pose",
-         {{"position", {{"x", p[0]}, {"y", p[1]}, {"z", p[2]}}},
-          {"orientation", {{"x", q[1]}, {"y", q[2]}, {"z", q[3]}, {"w", q[0]}}}}},
-        {"session_t_s", session_t_s}};
-    writer.write(channels.get("/reference/pose", "foxglove.PoseInFrame", pose_in_frame_schema()), time, json_text(pose));
+    nlohmann::ordered_json pose{{"timestamp", time_json(time)},
+                                {"frame_id", "reference"},
+                                {"pose",
+                                 {{"position", {{"x", p[0]}, {"y", p[1]}, {"z", p[2]}}},
+                                  {"orientation", {{"x", q[1]}, {"y", q[2]}, {"z", q[3]}, {"w", q[0]}}}}},
+                                {"session_t_s", session_t_s}};
+    writer.write(channels.get("/reference/pose", "foxglove.PoseInFrame", pose_in_frame_schema()), time,
+                 json_text(pose));
     if (r.velocity) {
       const auto& v = *r.velocity;
       nlohmann::ordered_json velocity{

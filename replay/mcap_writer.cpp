@@ -136,8 +136,7 @@ void Writer::close_chunk() {
   const std::uint64_t indexes_start = offset_;
   for (auto& [channel, entries] : chunk_messages_) {
     // Readers merge channels by time: each index lists its messages in time order, ties in file order.
-    std::stable_sort(entries.begin(), entries.end(),
-                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::stable_sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     Fields tuples;
     for (const auto& [time, offset] : entries) tuples.u64(time).u64(offset);
     Fields message_index;

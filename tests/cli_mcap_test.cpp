@@ -68,8 +68,8 @@ class McapExport : public ::testing::Test {
 
   // A simulated flight with its truth as reference, and a replay run with the paper's parameters for estimates.
   std::int64_t simulated_session(double seconds) {
-    const auto sim = run_imubridge("sim --scenario paper --seed 3 --duration " + std::to_string(seconds) + " --db " +
-                                   db_.string());
+    const auto sim =
+        run_imubridge("sim --scenario paper --seed 3 --duration " + std::to_string(seconds) + " --db " + db_.string());
     EXPECT_EQ(sim.exit_code, 0) << sim.err;
     const std::int64_t session = std::stoll(sim.out.substr(sim.out.rfind('\n', sim.out.size() - 2) + 1));
     const fs::path params = dir_ / "PARAMS.json";
@@ -211,13 +211,22 @@ TEST_F(McapExport, SessionWithoutRunsHasNoEstimateChannelAndEmptyTextSurvives) {
   store::Store store(db_);
   const auto session = store.begin_session({.kind = "test", .config = "{}"});
   const auto link = store.add_link(session, "imu0", "imubridge", "test");
-  store.append_sample(session, {.link_id = link, .seq = 0, .device_time_us = 1000, .recv_mono_ns = 50'000'000,
-                                .accel = {0, 0, -9.8}, .gyro = {0, 0, 0}});
-  store.append_sample(session, {.link_id = link, .seq = 1, .device_time_us = 2000, .recv_mono_ns = 51'000'000,
-                                .accel = {0.5, 0, -9.8}, .gyro = {0, 0.25, 0}});
+  store.append_sample(session, {.link_id = link,
+                                .seq = 0,
+                                .device_time_us = 1000,
+                                .recv_mono_ns = 50'000'000,
+                                .accel = {0, 0, -9.8},
+                                .gyro = {0, 0, 0}});
+  store.append_sample(session, {.link_id = link,
+                                .seq = 1,
+                                .device_time_us = 2000,
+                                .recv_mono_ns = 51'000'000,
+                                .accel = {0.5, 0, -9.8},
+                                .gyro = {0, 0.25, 0}});
   // Before the first sample (its session time is negative) and with bytes that are not UTF-8.
-  store.append_event(session, {.mono_ns = 40'000'000, .wall_ns = 1, .kind = "note", .count = 1,
-                               .detail = std::string("bad \xff byte")});
+  store.append_event(
+      session,
+      {.mono_ns = 40'000'000, .wall_ns = 1, .kind = "note", .count = 1, .detail = std::string("bad \xff byte")});
   store.commit();
   const fs::path file = dir_ / "small.mcap";
   const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session) +

@@ -464,8 +464,8 @@ TEST_F(ExportCommand, EventsQuoteTextAsRfc4180SaysAndKeepSessionEventsApart) {
 // Session time by default, as identify, diagnose and import speak: samples and estimates from their link's first
 // sample on the IMU's clock (5000 us here), reference and events from the first sample's arrival (123456789012 ns).
 TEST_F(ExportCommand, SessionTimeIsTheDefaultAndSaysSo) {
-  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) +
-                               " --what samples");
+  const auto r =
+      run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session_) + " --what samples");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto samples = lines_of(r.out);
   ASSERT_EQ(samples.size(), 3u);
@@ -492,8 +492,8 @@ TEST_F(ExportCommand, SessionTimeOfASessionWithoutSamplesIsRefusedWithTheRemedy)
     store::Store store(db_);
     empty = store.begin_session({.kind = "sim", .config = "{}"});
   }
-  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(empty) +
-                               " --what events");
+  const auto r =
+      run_imubridge("export --db " + db_.string() + " --session " + std::to_string(empty) + " --what events");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("has no samples, so no session time"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--time recorded"), std::string::npos) << r.err;
@@ -531,14 +531,16 @@ TEST_F(ExportCommand, AFailedExportLeavesAnExistingFileUntouched) {
 TEST_F(ReplayCommand, AFailedImportLeavesNoStoreAndAMissingFolderIsAUsageError) {
   const fs::path db = dir_ / "new.db";
   for (const char* format : {"ulog", "tlog", "euroc"}) {
-    const auto r = run_imubridge(std::string("import ") + format + " " + (dir_ / "unreadable").string() + " --db " + db.string());
+    const auto r =
+        run_imubridge(std::string("import ") + format + " " + (dir_ / "unreadable").string() + " --db " + db.string());
     EXPECT_EQ(r.exit_code, 2) << format << ": " << r.err;
     EXPECT_EQ(count_lines(r.err), 1) << r.err;
     EXPECT_FALSE(fs::exists(db)) << format;
     EXPECT_FALSE(fs::exists(db.string() + "-wal")) << format;
   }
-  const auto r = run_imubridge("import ulog " + std::string(IMUBRIDGE_SOURCE_DIR) + "/tests/data/ulog/sample_log_small.ulg" +
-                               " --db " + (dir_ / "no_folder" / "x.db").string());
+  const auto r =
+      run_imubridge("import ulog " + std::string(IMUBRIDGE_SOURCE_DIR) + "/tests/data/ulog/sample_log_small.ulg" +
+                    " --db " + (dir_ / "no_folder" / "x.db").string());
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_EQ(count_lines(r.err), 1) << r.err;
   EXPECT_NE(r.err.find("no folder " + (dir_ / "no_folder").string()), std::string::npos) << r.err;

@@ -48,9 +48,7 @@ TEST(WholeFile, WithoutCommitTheTargetStaysAndNoTemporaryFileRemains) {
   }
   EXPECT_EQ(slurp(target), "{}\n");
   EXPECT_EQ(entries(dir.path()), 1u);
-  {
-    fileio::WholeFile never_written(dir / "new.json");
-  }
+  { fileio::WholeFile never_written(dir / "new.json"); }
   EXPECT_FALSE(fs::exists(dir / "new.json"));
   EXPECT_EQ(entries(dir.path()), 1u);
 }
