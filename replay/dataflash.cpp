@@ -26,6 +26,11 @@ std::string text_of(const std::uint8_t* p, std::size_t size) {
   return std::string(reinterpret_cast<const char*>(p), n);
 }
 
+// A float field as an integer: truncated, 0 when NaN or beyond int64 (a cast would be undefined).
+std::int64_t to_integer(double v) {
+  return v > -9.2e18 && v < 9.2e18 ? static_cast<std::int64_t>(v) : 0;
+}
+
 // The scaling a format character itself implies.
 double implied_scale(char type) {
   switch (type) {
@@ -211,9 +216,9 @@ std::int64_t Message::integer(std::size_t record, std::size_t field) const {
     case 'Q':
       return static_cast<std::int64_t>(load<std::uint64_t>(p));
     case 'f':
-      return static_cast<std::int64_t>(load<float>(p));
+      return to_integer(load<float>(p));
     case 'd':
-      return static_cast<std::int64_t>(load<double>(p));
+      return to_integer(load<double>(p));
     default:
       return 0;
   }

@@ -12,7 +12,6 @@
 #include <vector>
 
 #include "replay/dataflash.hpp"
-#include "replay/euroc_import.hpp"
 
 namespace imubridge::replay {
 namespace {
@@ -285,12 +284,8 @@ nlohmann::json metadata(const dataflash::Log& log, const DataflashImportOptions&
 }  // namespace
 
 DataflashImportResult import_dataflash(store::Store& store, const DataflashImportOptions& options) {
-  const auto calibration = import_calibration(options.accel_lsb, options.gyro_lsb);
-  if (!calibration.valid() || !(options.accel_lsb > 0) || !(options.gyro_lsb > 0)) {
-    throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
-  }
-  check_gap_threshold(options.gap_threshold_s);
-  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  const ImuLogSettings settings = imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes,
+                                                   options.gap_threshold_s, options.progress, options.file);
   const dataflash::Log log = dataflash::read_file(options.file, options.progress);
   const std::string file = options.file.string();
 
@@ -333,15 +328,7 @@ DataflashImportResult import_dataflash(store::Store& store, const DataflashImpor
   result.params = params.size();
   imported.config = metadata(log, options, result, imported.imu_source, std::move(params), std::move(changes));
   imported.damage = log.damage;
-  record_imu_log(store, std::move(imported),
-                 {.accel_lsb = options.accel_lsb,
-                  .gyro_lsb = options.gyro_lsb,
-                  .declared_axes = declared_axes,
-                  .imu_axes = options.imu_axes,
-                  .gap_threshold_s = options.gap_threshold_s,
-                  .progress = options.progress,
-                  .file_size = options.progress ? std::filesystem::file_size(options.file) : 0},
-                 result);
+  record_imu_log(store, std::move(imported), settings, result);
   return result;
 }
 

@@ -124,6 +124,21 @@ Eigen::Quaterniond attitude_from_euler(double roll, double pitch, double yaw) {
          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX());
 }
 
+ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::string& imu_axes, double gap_threshold_s,
+                                const ImportProgressCallback& progress, const std::filesystem::path& file) {
+  if (!import_calibration(accel_lsb, gyro_lsb).valid() || !(accel_lsb > 0) || !(gyro_lsb > 0)) {
+    throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
+  }
+  check_gap_threshold(gap_threshold_s);
+  return {.accel_lsb = accel_lsb,
+          .gyro_lsb = gyro_lsb,
+          .declared_axes = estimator::parse_imu_axes(imu_axes),
+          .imu_axes = imu_axes,
+          .gap_threshold_s = gap_threshold_s,
+          .progress = progress,
+          .file_size = progress && std::filesystem::exists(file) ? std::filesystem::file_size(file) : 0};
+}
+
 void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result) {
   const auto calibration = import_calibration(settings.accel_lsb, settings.gyro_lsb);
   const std::vector<ImuRow>& rows = log.rows;

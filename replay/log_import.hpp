@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -135,6 +136,12 @@ struct ImuLogSettings {
   ImportProgressCallback progress{};
   std::uint64_t file_size = 0;  // for progress
 };
+
+// The settings from an import's options, checked before anything is read: throws std::invalid_argument for
+// resolutions that are not positive and finite, a gap threshold that is not, or IMU axes that do not parse. `progress`
+// and the file's size (for it) are taken along.
+ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::string& imu_axes, double gap_threshold_s,
+                                const ImportProgressCallback& progress, const std::filesystem::path& file);
 
 struct ImuLogImportResult {
   std::int64_t session = 0;

@@ -11,7 +11,6 @@
 #include <utility>
 #include <vector>
 
-#include "replay/euroc_import.hpp"
 #include "replay/log_import.hpp"
 #include "replay/ulog.hpp"
 
@@ -186,12 +185,8 @@ nlohmann::json metadata(const ulog::Log& log, const UlogImportOptions& options, 
 }  // namespace
 
 UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& options) {
-  const auto calibration = import_calibration(options.accel_lsb, options.gyro_lsb);
-  if (!calibration.valid() || !(options.accel_lsb > 0) || !(options.gyro_lsb > 0)) {
-    throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
-  }
-  check_gap_threshold(options.gap_threshold_s);
-  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  const ImuLogSettings settings = imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes,
+                                                   options.gap_threshold_s, options.progress, options.file);
   const ulog::Log log = ulog::read_file(options.file, options.progress);
   const std::string file = options.file.string();
 
@@ -238,15 +233,7 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
            "vehicle_land_detected: landed, after " + seconds_text(flight.to_us - flight.from_us) + " in the air"});
     }
   }
-  record_imu_log(store, std::move(imported),
-                 {.accel_lsb = options.accel_lsb,
-                  .gyro_lsb = options.gyro_lsb,
-                  .declared_axes = declared_axes,
-                  .imu_axes = options.imu_axes,
-                  .gap_threshold_s = options.gap_threshold_s,
-                  .progress = options.progress,
-                  .file_size = options.progress ? std::filesystem::file_size(options.file) : 0},
-                 result);
+  record_imu_log(store, std::move(imported), settings, result);
   return result;
 }
 
