@@ -353,7 +353,9 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     return state;
   };
   State current = fit_base();
-  if (!current.summary.implausible.empty()) {
+  const bool lever_arm_implausible = std::find(current.implausible_limits.begin(), current.implausible_limits.end(),
+                                               "lever_arm") != current.implausible_limits.end();
+  if (lever_arm_implausible) {
     // A base no airframe has is not carried on: it is fitted again with its lever arm inside the table (a box
     // inscribed in the table's sphere for the 3-D model), from the same start.
     std::string was = current.summary.implausible.front();
@@ -375,7 +377,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
       }
       return false;
     };
-    if (lever_arm_at_bound() || !current.summary.implausible.empty()) {
+    if (lever_arm_at_bound()) {
       // Pushed to the edge of the box, the lever arm is not placed by these data either: the IMU is taken at the
       // mass centre, the assumption that claims least.
       setup.lever_arm_bound = 0.0;
@@ -384,9 +386,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           "inside the table the lever arm went to the edge of its range: the data do not place it, and it is held at "
           "the mass centre (0, 0, 0)");
     }
-    if (!current.summary.implausible.empty())
-      throw std::invalid_argument("diagnose: the base model is implausible even with its lever arm inside the "
-                                  "plausibility table: " + current.summary.implausible.front());
+
   }
   const Model base_model(signals, setup);
   out.base = current.summary;
@@ -481,7 +481,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           for (std::size_t i = 1; i < implausible.size(); ++i) trial.skipped += "; " + implausible[i].message;
           return {trial, std::nullopt};
         }
-        if (auto why = undetermined(model, best, offset)) {
+        if (auto why = options.judge_by_flight ? undetermined(model, best, offset) : std::nullopt) {
           trial.skipped = *why;
           return {trial, std::nullopt};
         }
@@ -552,7 +552,8 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         const bool passes_f_test = t.p_value < level;
         // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
         const bool flies_better =
-            judged_by_velocity
+            !options.judge_by_flight ? true
+            : judged_by_velocity
                 ? !(velocity_before && t.velocity_validation) || *t.velocity_validation < *velocity_before
                 : !(likelihood_before && t.likelihood_validation) || *t.likelihood_validation > *likelihood_before;
         t.significant = improves && passes_f_test && flies_better;

@@ -47,6 +47,11 @@ struct DiagnoseOptions {
   // `min_improvement` (relative), so that gains too small to matter do not pile up on long flights.
   double significance = 0.01;
   double min_improvement = 0.02;
+  // The rules by what users fly with (docs/effects.md, "The velocity or likelihood rule"): a step must also lower the
+  // validation velocity (with the reference) or raise the filter's likelihood (from the IMU alone), and a candidate
+  // whose parameters the data do not determine is refused. Opt-in (--judge-by-flight) until the simulated findings
+  // that tests/diagnose_search_test.cpp and diagnose_filter_test.cpp hold are re-established under them.
+  bool judge_by_flight = false;
   std::string session;  // how the report names the data
   // A candidate whose fitted values exceed these is refused, whatever its gain.
   estimator::PlausibilityLimits limits;

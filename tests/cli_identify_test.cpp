@@ -147,7 +147,7 @@ TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {
                         p),
                2, "nothing to identify");
   expect_error(identify("--session 1 --method ga --population 1" + p), 2, "population");
-  expect_error(identify("--session 1 --train 0:0.01" + p), 2, "at least 4 samples");
+  expect_error(identify("--session 1 --train 0:0.01" + p), 2, "holds 0.0 s of data; identifying the drag needs at least 10 s");
   expect_error(identify("--session 2 --velocity reference" + p), 2, "no reference trajectory");
   // Without a reference the velocity defaults to the filter's, which the GA cannot fit: refused, not run by LM.
   expect_error(identify("--session 2 --method ga" + p), 2, "--velocity eq12");

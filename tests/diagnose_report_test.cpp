@@ -59,14 +59,14 @@ ModelFit fit(std::vector<std::string> effects, double rmse_train, double rmse_va
 }
 
 CandidateTrial candidate(std::string effect, double rmse_validation, bool significant, std::string skipped = {}) {
-  return {std::move(effect),
-          rmse_validation * 0.95,
-          rmse_validation,
-          12.0,
-          significant ? 1e-6 : 0.4,
-          significant,
-          significant ? "" : "F-test: p = 0.4, not below 0.001 (0.01 / 10 candidates)",
-          std::move(skipped)};
+  return {.effect = std::move(effect),
+          .rmse_train = rmse_validation * 0.95,
+          .rmse_validation = rmse_validation,
+          .statistic = 12.0,
+          .p_value = significant ? 1e-6 : 0.4,
+          .significant = significant,
+          .rejected_by = significant ? "" : "F-test: p = 0.4, not below 0.001 (0.01 / 10 candidates)",
+          .skipped = std::move(skipped)};
 }
 
 // Two steps (linear_drag, then accel_bias) and a 37.5 Hz line left unexplained on axis x.

@@ -29,6 +29,7 @@ DiagnoseOptions options(VelocitySource velocity, int max_steps) {
   o.train = estimator::TimeWindow{0.0, 30.0};
   o.validate = estimator::TimeWindow{30.0, 50.0};
   o.max_steps = max_steps;
+  o.judge_by_flight = true;
   return o;
 }
 
@@ -64,19 +65,35 @@ TEST(DiagnoseRules, ATrainingWindowTooShortToTellTheDragIsRefusedWithItsLength) 
 
 TEST(DiagnoseRules, EveryCandidateIsJudgedByTheVelocityWithAReference) {
   const Diagnosis d = run_diagnosis(paper_flight(), options(VelocitySource::reference, 2));
-  ASSERT_FALSE(d.steps.empty());
-  double before = d.zero_velocity->validation.horizontal;
+  ASSERT_TRUE(d.zero_velocity);
+  double before = d.base.velocity->validation.horizontal;
+  std::size_t tried = 0, refused_by_velocity = 0;
+  const auto check = [&](const std::vector<CandidateTrial>& candidates) {
+    for (const CandidateTrial& c : candidates) {
+      if (!c.skipped.empty()) continue;
+      ++tried;
+      ASSERT_TRUE(c.velocity_validation) << c.effect;
+      EXPECT_FALSE(c.likelihood_validation) << c.effect;
+      if (c.rejected_by.rfind("velocity rule", 0) == 0) {
+        ++refused_by_velocity;
+        EXPECT_GE(*c.velocity_validation, before) << c.effect;  // refused because it flew no better
+      }
+    }
+  };
   for (const Step& s : d.steps) {
+    check(s.candidates);
     // Each step kept lowered the velocity a user flies with.
     ASSERT_TRUE(s.fit.velocity);
     EXPECT_LT(s.fit.velocity->validation.horizontal, before) << s.effect;
     before = s.fit.velocity->validation.horizontal;
-    for (const CandidateTrial& c : s.candidates) {
-      if (!c.skipped.empty()) continue;
-      EXPECT_TRUE(c.velocity_validation) << c.effect;
-      EXPECT_FALSE(c.likelihood_validation) << c.effect;
-    }
   }
+  check(d.last_candidates);
+  EXPECT_GT(tried, 0u);
+  // Without the rule, the same flight keeps a step the rule refuses: the rule is what decides here.
+  DiagnoseOptions without = options(VelocitySource::reference, 2);
+  without.judge_by_flight = false;
+  const Diagnosis plain = run_diagnosis(paper_flight(), without);
+  if (refused_by_velocity > 0) EXPECT_GT(plain.steps.size(), d.steps.size());
 }
 
 TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood) {

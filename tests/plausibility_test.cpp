@@ -66,7 +66,8 @@ TEST(Plausibility, LimitsCanBeOverriddenAndBadOverridesAreRefused) {
 
 TEST(Plausibility, TheTableListsEveryLimit) {
   const auto table = limit_table();
-  ASSERT_EQ(table.size(), 7u);
+  ASSERT_EQ(table.size(), 9u);
+  EXPECT_EQ(table.back().first, "drag_quadratic");
   EXPECT_EQ(table.front().first, "lever_arm");
   EXPECT_DOUBLE_EQ(table.front().second, 0.5);
 }

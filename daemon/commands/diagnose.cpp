@@ -47,6 +47,7 @@ struct DiagnoseCliOptions {
   std::vector<std::string> ignore_bands, limits;
   std::optional<std::string> out;
   int max_steps = 8;
+  bool judge_by_flight = false;
   double lowpass_hz = 0.0;
 };
 
@@ -231,6 +232,7 @@ int run(const DiagnoseCliOptions& o) {
   for (const std::string& band : o.ignore_bands) options.ignore_bands.push_back(parse_band(band));
   if (o.max_steps < 0) throw std::invalid_argument("--max-steps must be 0 or more");
   options.max_steps = o.max_steps;
+  options.judge_by_flight = o.judge_by_flight;
   if (o.lowpass_hz < 0.0) throw std::invalid_argument("--lowpass must be a positive frequency in Hz (0: off)");
   options.lowpass_hz = o.lowpass_hz;
   options.session = o.db + "#" + std::to_string(o.session);
@@ -302,6 +304,9 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
+  cmd->add_flag("--judge-by-flight", o->judge_by_flight,
+                "Keep a step only if it also lowers the validation velocity (reference) or raises the filter's "
+                "likelihood (IMU alone), and refuse undetermined candidates (docs/effects.md)");
   cmd->add_option("--lowpass", o->lowpass_hz,
                   "Compare model and measurement below this frequency only, Hz (0: off); for airframes whose "
                   "vibration swamps the accelerometers")
