@@ -8,6 +8,8 @@
 #   tests/package_install_test.sh --build-dir BUILD   # packages BUILD first (cpack, no rebuild): ctest runs this
 #   tests/package_install_test.sh --deb FILE.deb      # a package made already (scripts/package)
 set -euo pipefail
+# A command that stops the script under set -e names itself, so a run never ends without saying which check broke.
+trap 'echo "FAIL: line $LINENO: $BASH_COMMAND exited with $?"' ERR
 
 usage() { echo "usage: $0 --build-dir BUILD | --deb FILE.deb" >&2; exit 2; }
 [ $# -eq 2 ] || usage
@@ -87,7 +89,8 @@ check "Depends names ${reload_owner:-the package of $reload}, whose $reload Exec
 # /usr: a package owns one of the two).
 depends_names=$(sed 's/ ([^)]*)//g; s/ | /\n/g; s/, /\n/g' <<<"$depends")
 while read -r library; do
-  path=$(ldconfig -p | awk -v l="$library" '$1 == l { print $NF; exit }')
+  # awk reads all of ldconfig's list: leaving early would end ldconfig with SIGPIPE, which pipefail makes fatal.
+  path=$(ldconfig -p | awk -v l="$library" '$1 == l && path == "" { path = $NF } END { print path }')
   owner=""
   for candidate in "$path" "$(readlink -f "$path")"; do
     [ -n "$owner" ] || owner=$(dpkg -S "$candidate" 2>/dev/null | cut -d: -f1 | head -1) || true
