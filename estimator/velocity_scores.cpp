@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "estimator/drag_velocity.hpp"
 #include "estimator/lever_arm_compensation.hpp"
@@ -76,35 +78,85 @@ FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParam
   return {sums[0] / static_cast<double>(counts[0]), sums[1] / static_cast<double>(counts[1])};
 }
 
-LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& windows) {
-  if (!series.reference) throw std::invalid_argument("the linear least-squares baseline needs a reference");
+namespace {
+
+// Means over consecutive kAnchorBlockSeconds blocks from the series' first sample: of the accelerometer and the
+// reference's body velocity (x, y), with each block's centre time. Blocks with no sample (a gap) are left out.
+struct Blocks {
+  std::vector<double> t;
+  std::vector<Eigen::Vector2d> accel, velocity;
+};
+Blocks block_means(const ImuSeries& series) {
+  if (!series.reference) throw std::invalid_argument("the least-squares anchor needs a reference");
   const std::vector<Eigen::Vector3d> v_body = truth(series);
-  LinearDragBaseline out;
+  Blocks out;
+  const double t0 = series.t.empty() ? 0.0 : series.t.front();
+  std::size_t k = 0;
+  while (k < series.size()) {
+    const auto block = std::floor((series.t[k] - t0) / kAnchorBlockSeconds);
+    Eigen::Vector2d a = Eigen::Vector2d::Zero(), v = Eigen::Vector2d::Zero();
+    double n = 0.0;
+    for (; k < series.size() && std::floor((series.t[k] - t0) / kAnchorBlockSeconds) == block; ++k, n += 1.0) {
+      a += series.accel[k].head<2>();
+      v += v_body[k].head<2>();
+    }
+    out.t.push_back(t0 + (block + 0.5) * kAnchorBlockSeconds);
+    out.accel.push_back(a / n);
+    out.velocity.push_back(v / n);
+  }
+  return out;
+}
+
+}  // namespace
+
+LeastSquaresDrag fit_least_squares_drag(const ImuSeries& series, const TimeWindow& train) {
+  const Blocks blocks = block_means(series);
+  LeastSquaresDrag out;
   for (int axis = 0; axis < 2; ++axis) {
     // a = c0 + c1 v: the normal equations of a straight line.
     double n = 0.0, sv = 0.0, sa = 0.0, svv = 0.0, sva = 0.0;
-    for (std::size_t k = 0; k < series.size(); ++k) {
-      if (!inside(series.t[k], windows.train)) continue;
-      const double v = v_body[k][axis], a = series.accel[k][axis];
+    for (std::size_t i = 0; i < blocks.t.size(); ++i) {
+      if (!inside(blocks.t[i], train)) continue;
+      const double v = blocks.velocity[i][axis], a = blocks.accel[i][axis];
       n += 1.0, sv += v, sa += a, svv += v * v, sva += v * a;
     }
     const double det = n * svv - sv * sv;
     if (!(det > 0.0) || n < 2.0)
-      throw std::invalid_argument("the linear least-squares baseline: the training velocity does not vary");
+      throw std::invalid_argument("the least-squares anchor: the training velocity does not vary");
     const double slope = (n * sva - sv * sa) / det;
+    if (!(slope < 0.0))
+      throw std::invalid_argument(std::string("the least-squares anchor: the accelerometer does not fall with the ") +
+                                  (axis == 0 ? "x" : "y") + " velocity on the training window (no drag to invert)");
     out.k[axis] = -slope;
     out.b[axis] = (sa - slope * sv) / n;
   }
-  const auto score = [&](const TimeWindow& w) {
-    VelocityErrorSum sum;
-    for (std::size_t k = 0; k < series.size(); ++k) {
-      if (!inside(series.t[k], w)) continue;
-      const Eigen::Vector2d v = (out.b - series.accel[k].head<2>()).cwiseQuotient(out.k);
-      sum.add(v - v_body[k].head<2>());
-    }
-    return sum.rmse();
-  };
-  out.scores = {score(windows.train), score(windows.validate), ""};
+  return out;
+}
+
+LeastSquaresDragScores score_least_squares_drag(const ImuSeries& series, const LeastSquaresDrag& fit,
+                                                const TimeWindow& window) {
+  const Blocks blocks = block_means(series);
+  std::vector<Eigen::Vector2d> inverted(blocks.t.size());
+  for (std::size_t i = 0; i < blocks.t.size(); ++i) inverted[i] = (fit.b - blocks.accel[i]).cwiseQuotient(fit.k);
+  // The centred moving average over the blocks within half the smoothing span (fewer at the ends and at gaps).
+  const double half = 0.5 * kAnchorSmoothingSeconds;
+  LeastSquaresDragScores out;
+  VelocityErrorSum raw, smoothed;
+  std::size_t first = 0;
+  for (std::size_t i = 0; i < blocks.t.size(); ++i) {
+    while (blocks.t[first] < blocks.t[i] - half) ++first;
+    if (!inside(blocks.t[i], window)) continue;
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    double n = 0.0;
+    for (std::size_t j = first; j < blocks.t.size() && blocks.t[j] <= blocks.t[i] + half; ++j, n += 1.0)
+      sum += inverted[j];
+    raw.add(inverted[i] - blocks.velocity[i]);
+    smoothed.add(sum / n - blocks.velocity[i]);
+    ++out.blocks;
+  }
+  if (out.blocks == 0) throw std::invalid_argument("the least-squares anchor: no 0.1-s block inside the window");
+  out.raw = raw.rmse();
+  out.smoothed = smoothed.rmse();
   return out;
 }
 

@@ -2,6 +2,8 @@
 // What a model does for the velocity a user flies with: the drag-velocity estimator run with the model over a flight
 // that has a reference, scored on the training and validation windows. identify and diagnose report it for every
 // model they fit, in m/s beside the specific-force residual.
+#include <Eigen/Core>
+#include <cstddef>
 #include <optional>
 #include <string>
 
@@ -36,15 +38,28 @@ FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParam
 // "Not moving": the reference's own RMS horizontal speed on each window, in the body frame `mounting` defines.
 VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector3d& mounting, const Windows& windows);
 
-// The two-parameter baseline a reference makes possible, the way PX4's drag-tuning script identifies its coefficient:
-// per horizontal body axis, a least-squares line a = -k v + b between the accelerometer and the reference velocity
-// on the training window, then v = (b - a) / k sample by sample. A model must beat this to be worth its parameters.
-struct LinearDragBaseline {
+// The fair anchor a reference makes possible (docs/results.md): per horizontal body axis, the least-squares line
+// a = -k v + b between the accelerometer and the reference velocity, both averaged over 0.1-s blocks, the way PX4's
+// drag-tuning script identifies its coefficient. A model must beat it to be worth its parameters; inverted sample by
+// sample it would carry the airframe's vibration into the velocity, which nobody flies, so it is fitted and inverted
+// on the blocks, and scored raw and smoothed by a 1-s centred moving average.
+inline constexpr double kAnchorBlockSeconds = 0.1;
+inline constexpr double kAnchorSmoothingSeconds = 1.0;
+struct LeastSquaresDrag {
   Eigen::Vector2d k = Eigen::Vector2d::Zero();  // 1/s
   Eigen::Vector2d b = Eigen::Vector2d::Zero();  // m/s^2
-  VelocityScores scores;
 };
-// Throws std::invalid_argument without a reference, or when an axis's training velocity does not vary.
-LinearDragBaseline linear_drag_baseline(const ImuSeries& series, const Windows& windows);
+// Fitted on `train`. Throws std::invalid_argument without a reference, or when an axis's training velocity does not
+// vary or its slope is not a drag (k <= 0: no velocity to invert).
+LeastSquaresDrag fit_least_squares_drag(const ImuSeries& series, const TimeWindow& train);
+// The fit inverted on `window` of a series (the one it was fitted on, or another flight), scored against the
+// reference's block means, in the series' axes.
+struct LeastSquaresDragScores {
+  VelocityError raw, smoothed;
+  std::size_t blocks = 0;
+};
+// Throws std::invalid_argument without a reference, or for a window with no whole block.
+LeastSquaresDragScores score_least_squares_drag(const ImuSeries& series, const LeastSquaresDrag& fit,
+                                                const TimeWindow& window);
 
 }  // namespace imubridge::estimator

@@ -22,8 +22,9 @@ using nlohmann::json;
 
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
-// One 60-s flight of the paper's scenario, recorded once for the whole suite (session 1), and a session without a
-// reference trajectory (session 2), written through the store as an importer without ground truth would.
+// One 60-s flight of the paper's scenario, recorded once for the whole suite (session 1), a session without a
+// reference trajectory (session 2), written through the store as an importer without ground truth would, and a
+// second flight of the scenario with another seed (session 3).
 class IdentifyCommand : public ::testing::Test {
  protected:
   static inline fs::path dir_;
@@ -35,17 +36,21 @@ class IdentifyCommand : public ::testing::Test {
     db_ = (dir_ / "flights.db").string();
     const CommandResult r = run_imubridge("sim --scenario paper --seed 1 --db " + db_);
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    store::Store store(db_);
-    const std::int64_t session = store.begin_session({.kind = "import"});
-    const std::int64_t link = store.add_link(session, "imu0", "imubridge", "test");
-    for (int k = 0; k < 400; ++k) {
-      protocol::Sample s;
-      s.link_id = link;
-      s.device_time_us = 5000 * k;
-      s.recv_mono_ns = 5'000'000 * static_cast<std::int64_t>(k);
-      s.accel = {0.0, 0.0, -9.8};
-      store.append_sample(session, s);
+    {  // closed before the next writer starts
+      store::Store store(db_);
+      const std::int64_t session = store.begin_session({.kind = "import"});
+      const std::int64_t link = store.add_link(session, "imu0", "imubridge", "test");
+      for (int k = 0; k < 400; ++k) {
+        protocol::Sample s;
+        s.link_id = link;
+        s.device_time_us = 5000 * k;
+        s.recv_mono_ns = 5'000'000 * static_cast<std::int64_t>(k);
+        s.accel = {0.0, 0.0, -9.8};
+        store.append_sample(session, s);
+      }
     }
+    const CommandResult second = run_imubridge("sim --scenario paper --seed 2 --db " + db_);
+    ASSERT_EQ(second.exit_code, 0) << second.err;
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
@@ -133,6 +138,60 @@ TEST_F(IdentifyCommand, EvaluateScoresTheEstimatorAgainstTheReference) {
   EXPECT_LT(rmse["estimator"]["horizontal"], rmse["eq12"]["horizontal"]);
 }
 
+TEST_F(IdentifyCommand, EvaluateScoresOneCalibrationOverSeveralFlights) {
+  ASSERT_EQ(identify("--session 1 --velocity reference --out " + out("fleet.json")).exit_code, 0);
+  const std::string evaluate = "evaluate --db " + db_ + " --params " + out("fleet.json") + " --window 10:60 ";
+  const CommandResult r = run_imubridge(evaluate + "--session 1,3");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json e = json::parse(r.out);
+  ASSERT_EQ(e["flights"].size(), 2u);
+  EXPECT_EQ(e["flights"][0]["session"], 1);
+  EXPECT_EQ(e["flights"][1]["session"], 3);
+  const json& summary = e["summary"];
+  EXPECT_EQ(summary["flights_scored"], 2);
+  EXPECT_EQ(summary["flights_worse_than_zero"], 0);
+  // The median of two is their mean.
+  const auto horizontal = [&e](int f, const char* source) {
+    return e["flights"][f]["rmse_m_s"][source]["horizontal"].get<double>();
+  };
+  EXPECT_NEAR(summary["median_rmse_m_s"]["estimator"].get<double>(),
+              0.5 * (horizontal(0, "estimator") + horizontal(1, "estimator")), 1e-9);
+  EXPECT_LT(summary["median_ratio_to_zero"].get<double>(), 1.0);
+  EXPECT_NE(r.err.find("2 flights: median"), std::string::npos) << r.err;
+
+  // A flight that cannot be scored is named in its row and in the exit status; the others are still scored.
+  const CommandResult partly = run_imubridge(evaluate + "--session 1-3");
+  EXPECT_EQ(partly.exit_code, 1) << partly.err;
+  const json p = json::parse(partly.out);
+  ASSERT_EQ(p["flights"].size(), 3u);
+  EXPECT_NE(p["flights"][1]["error"].get<std::string>().find("no reference trajectory"), std::string::npos);
+  EXPECT_EQ(p["summary"]["flights_scored"], 2);
+  EXPECT_EQ(p["summary"]["flights_not_scored"], 1);
+
+  expect_error(run_imubridge(evaluate + "--session 3-1"), 2, "invalid --session");
+  expect_error(run_imubridge(evaluate + "--session 1,x"), 2, "invalid --session");
+}
+
+TEST_F(IdentifyCommand, EvaluateCarriesTheLeastSquaresAnchorFromItsOwnSession) {
+  ASSERT_EQ(identify("--session 1 --velocity reference --out " + out("anchor.json")).exit_code, 0);
+  const std::string evaluate = "evaluate --db " + db_ + " --params " + out("anchor.json") + " --window 10:60 ";
+  const CommandResult own = run_imubridge(evaluate + "--session 3 --baseline-train 0:60");
+  ASSERT_EQ(own.exit_code, 0) << own.err;
+  const CommandResult carried = run_imubridge(evaluate + "--session 3 --baseline-train 0:60 --baseline-session 1");
+  ASSERT_EQ(carried.exit_code, 0) << carried.err;
+  const json o = json::parse(own.out), c = json::parse(carried.out);
+  EXPECT_EQ(o["least_squares"]["train_session"], 3);
+  EXPECT_EQ(c["least_squares"]["train_session"], 1);
+  EXPECT_NE(o["least_squares"]["k"], c["least_squares"]["k"]);
+  for (const json* e : {&o, &c}) {
+    const json& rmse = (*e)["rmse_m_s"];
+    EXPECT_GT(rmse["least_squares_means"]["horizontal"].get<double>(), 0.0);
+    // The 1-s average takes out vibration that the 0.1-s means keep.
+    EXPECT_LT(rmse["least_squares_smoothed"]["horizontal"], rmse["least_squares_means"]["horizontal"]);
+    EXPECT_EQ((*e)["least_squares"]["blocks_scored"], 500);
+  }
+}
+
 TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {
   const std::string p = " --out " + out("bad.json");
   expect_error(identify("--session 1 --train 40:20" + p), 2, "bad window");
@@ -147,7 +206,8 @@ TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {
                         p),
                2, "nothing to identify");
   expect_error(identify("--session 1 --method ga --population 1" + p), 2, "population");
-  expect_error(identify("--session 1 --train 0:0.01" + p), 2, "holds 0.0 s of data; identifying the drag needs at least 10 s");
+  expect_error(identify("--session 1 --train 0:0.01" + p), 2,
+               "holds 0.0 s of data; identifying the drag needs at least 10 s");
   expect_error(identify("--session 2 --velocity reference" + p), 2, "no reference trajectory");
   // Without a reference the velocity defaults to the filter's, which the GA cannot fit: refused, not run by LM.
   expect_error(identify("--session 2 --method ga" + p), 2, "--velocity eq12");

@@ -2,15 +2,21 @@
 // JSON, how far its velocity is from the truth, beside the raw drag inversion, eq. (12)'s open-loop integration and
 // "not moving" (docs/identification.md).
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <exception>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "daemon/command.hpp"
 #include "daemon/commands/reference_delay_option.hpp"
+#include "daemon/commands/session_list.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/params.hpp"
@@ -25,73 +31,170 @@ namespace est = imubridge::estimator;
 using nlohmann::json;
 
 struct EvaluateCliOptions {
-  std::string db, params;
-  std::int64_t session = 0;
+  std::string db, params, sessions;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
   std::optional<double> reference_delay;
   bool in_flight = false;
   std::optional<std::string> window, baseline_train;
+  std::optional<std::int64_t> baseline_session;
 };
 
 json to_json(const est::VelocityError& e) {
   return {{"x", e.axis.x()}, {"y", e.axis.y()}, {"horizontal", e.horizontal}};
 }
 
-int run(const EvaluateCliOptions& o) {
-  const store::Store store(o.db, {.read_only = true});
+pipeline::SessionSeries read_session(const store::Store& store, std::int64_t id, const EvaluateCliOptions& o) {
   pipeline::SessionSeriesOptions reading{
       .link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
-  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
-  for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  pipeline::SessionSeries session = pipeline::read_session_series(store, id, reading);
+  for (const std::string& w : session.warnings)
+    std::fprintf(stderr, "warning: session %lld: %s\n", static_cast<long long>(id), w.c_str());
+  return session;
+}
+
+// The least-squares anchor and where it was fitted (docs/results.md, "fair anchors").
+struct Anchor {
+  est::LeastSquaresDrag fit;
+  std::int64_t session = 0;
+  est::TimeWindow train;
+};
+Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
+  const est::TimeWindow span = percent_span(session, o.in_flight).window;
+  const est::TimeWindow train = o.baseline_train ? est::parse_window(*o.baseline_train, span) : span;
+  return {est::fit_least_squares_drag(session.series, train), id, train};
+}
+
+// One session's scores, as JSON.
+json evaluate_session(const store::Store& store, std::int64_t id, const est::ModelParams& file,
+                      const std::optional<Anchor>& fixed_anchor, const EvaluateCliOptions& o) {
+  const pipeline::SessionSeries session = read_session(store, id, o);
   std::string left;
-  const est::ModelParams params =
-      est::for_flight(est::load_params(o.params), est::flight_identity(session.series), &left);
-  if (!left.empty()) std::fprintf(stderr, "%s\n", left.c_str());
+  const est::ModelParams params = est::for_flight(file, est::flight_identity(session.series), &left);
+  if (!left.empty()) std::fprintf(stderr, "session %lld: %s\n", static_cast<long long>(id), left.c_str());
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
   const est::VelocityEvaluation e =
       est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
   const est::DragVelocityCounters& c = e.counters;
-  const json out = {{"session", o.session},
-                    {"link", session.link_id},
-                    {"window", {e.window.start, e.window.end}},
-                    {"samples", e.samples},
-                    {"reference_delay_s", session.reference_shift_s},
-                    {"rmse_m_s",
-                     {{"estimator", to_json(e.estimator)},
-                      {"raw_inversion", to_json(e.inversion)},
-                      {"eq12", to_json(e.eq12)},
-                      {"zero", to_json(e.zero)}}},
-                    // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
-                    {"estimator_nees", e.nees},
-                    {"estimator_counters",
-                     {{"samples_in", c.samples_in},
-                      {"estimates_out", c.estimates_out},
-                      {"rejected_non_finite", c.rejected_non_finite},
-                      {"rejected_out_of_range", c.rejected_out_of_range},
-                      {"rejected_time", c.rejected_time},
-                      {"gaps", c.gaps},
-                      {"clock_restarts", c.clock_restarts}}},
-                    {"series_counts",
-                     {{"samples", session.counts.samples},
-                      {"non_finite", session.counts.non_finite},
-                      {"time_not_increasing", session.counts.time_not_increasing},
-                      {"outside_reference", session.counts.outside_reference}}}};
-  json report = out;
-  if (o.baseline_train) {
-    // Trained on its own window, scored on the evaluation window: the same data the model is judged on.
-    const est::TimeWindow train = est::parse_window(*o.baseline_train, span);
-    const est::LinearDragBaseline b = est::linear_drag_baseline(session.series, {train, e.window});
-    report["rmse_m_s"]["linear_least_squares"] = to_json(b.scores.validation);
-    report["linear_least_squares"] = {
-        {"train_window", {train.start, train.end}}, {"k", {b.k.x(), b.k.y()}}, {"b", {b.b.x(), b.b.y()}}};
+  json out = {{"session", id},
+              {"link", session.link_id},
+              {"window", {e.window.start, e.window.end}},
+              {"samples", e.samples},
+              {"reference_delay_s", session.reference_shift_s},
+              {"rmse_m_s",
+               {{"estimator", to_json(e.estimator)},
+                {"raw_inversion", to_json(e.inversion)},
+                {"eq12", to_json(e.eq12)},
+                {"zero", to_json(e.zero)}}},
+              // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
+              {"estimator_nees", e.nees},
+              {"estimator_counters",
+               {{"samples_in", c.samples_in},
+                {"estimates_out", c.estimates_out},
+                {"rejected_non_finite", c.rejected_non_finite},
+                {"rejected_out_of_range", c.rejected_out_of_range},
+                {"rejected_time", c.rejected_time},
+                {"gaps", c.gaps},
+                {"clock_restarts", c.clock_restarts}}},
+              {"series_counts",
+               {{"samples", session.counts.samples},
+                {"non_finite", session.counts.non_finite},
+                {"time_not_increasing", session.counts.time_not_increasing},
+                {"outside_reference", session.counts.outside_reference}}}};
+  if (o.baseline_train || o.baseline_session) {
+    // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window.
+    const Anchor anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
+    const est::LeastSquaresDragScores a = est::score_least_squares_drag(session.series, anchor.fit, e.window);
+    out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
+    out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
+    out["least_squares"] = {{"train_session", anchor.session},
+                            {"train_window", {anchor.train.start, anchor.train.end}},
+                            {"k", {anchor.fit.k.x(), anchor.fit.k.y()}},
+                            {"b", {anchor.fit.b.x(), anchor.fit.b.y()}},
+                            {"blocks_scored", a.blocks}};
   }
-  print_reference_delay(session);  // once scored: an error before it stays one line
-  std::printf("%s\n", report.dump(2).c_str());
-  return 0;
+  print_reference_delay(session);
+  return out;
+}
+
+double median(std::vector<double> x) {
+  if (x.empty()) return std::nan("");
+  std::sort(x.begin(), x.end());
+  const std::size_t n = x.size();
+  return n % 2 == 1 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
+}
+
+// Several flights: the per-flight table on stderr, and the medians and counts a user judges a calibration by.
+json summarise(const json& flights, std::size_t failed) {
+  std::vector<double> estimator, zero, ratio, nees, anchor_ratio;
+  std::size_t worse = 0, anchor_worse = 0;
+  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s\n", "session", "estimator", "zero", "ratio", "nees", "ls_smoothed");
+  for (const json& f : flights) {
+    if (f.contains("error")) {
+      std::fprintf(stderr, "%8lld  not scored: %s\n", f["session"].get<long long>(),
+                   f["error"].get<std::string>().c_str());
+      continue;
+    }
+    const double e = f["rmse_m_s"]["estimator"]["horizontal"], z = f["rmse_m_s"]["zero"]["horizontal"];
+    estimator.push_back(e), zero.push_back(z), ratio.push_back(e / z), nees.push_back(f["estimator_nees"]);
+    worse += e > z ? 1 : 0;
+    std::fprintf(stderr, "%8lld %9.3f %9.3f %7.2f %6.2f", f["session"].get<long long>(), e, z, e / z, nees.back());
+    if (f["rmse_m_s"].contains("least_squares_smoothed")) {
+      const double a = f["rmse_m_s"]["least_squares_smoothed"]["horizontal"];
+      anchor_ratio.push_back(a / z);
+      anchor_worse += a > z ? 1 : 0;
+      std::fprintf(stderr, " %12.3f", a);
+    }
+    std::fprintf(stderr, "\n");
+  }
+  json summary = {{"flights_scored", estimator.size()},
+                  {"flights_not_scored", failed},
+                  {"median_rmse_m_s", {{"estimator", median(estimator)}, {"zero", median(zero)}}},
+                  {"median_ratio_to_zero", median(ratio)},
+                  {"flights_worse_than_zero", worse},
+                  {"median_estimator_nees", median(nees)}};
+  std::fprintf(stderr,
+               "%zu flights: median %.3f m/s against zero velocity's %.3f (median ratio %.2f), %zu worse than zero, "
+               "median NEES %.2f\n",
+               estimator.size(), median(estimator), median(zero), median(ratio), worse, median(nees));
+  if (!anchor_ratio.empty()) {
+    summary["least_squares_smoothed"] = {{"median_ratio_to_zero", median(anchor_ratio)},
+                                         {"flights_worse_than_zero", anchor_worse}};
+    std::fprintf(stderr, "least-squares anchor (1-s smoothed): median ratio %.2f, %zu worse than zero\n",
+                 median(anchor_ratio), anchor_worse);
+  }
+  if (failed > 0) std::fprintf(stderr, "%zu flight(s) could not be scored (above)\n", failed);
+  return summary;
+}
+
+int run(const EvaluateCliOptions& o) {
+  const std::vector<std::int64_t> ids = parse_session_list(o.sessions);
+  const store::Store store(o.db, {.read_only = true});
+  const est::ModelParams file = est::load_params(o.params);
+  std::optional<Anchor> anchor;
+  if (o.baseline_session) anchor = fit_anchor(read_session(store, *o.baseline_session, o), *o.baseline_session, o);
+  if (ids.size() == 1) {
+    std::printf("%s\n", evaluate_session(store, ids.front(), file, anchor, o).dump(2).c_str());
+    return 0;
+  }
+  // Several flights: one that cannot be scored (no reference, a window outside it) is reported in its row and in
+  // the exit status, and the others are still scored.
+  json flights = json::array();
+  std::size_t failed = 0;
+  for (const std::int64_t id : ids) {
+    try {
+      flights.push_back(evaluate_session(store, id, file, anchor, o));
+    } catch (const std::exception& e) {
+      flights.push_back({{"session", id}, {"error", e.what()}});
+      ++failed;
+    }
+  }
+  const json summary = summarise(flights, failed);
+  std::printf("%s\n", json{{"params", o.params}, {"flights", flights}, {"summary", summary}}.dump(2).c_str());
+  return failed == 0 ? 0 : 1;
 }
 
 const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
@@ -99,15 +202,22 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
   auto* cmd = app.add_subcommand(
       "evaluate", "Score the drag-velocity estimator against a session's reference trajectory (JSON on stdout)");
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
-  cmd->add_option("--session", o->session, "Session id (it needs a reference trajectory)")->required();
+  cmd->add_option("--session", o->sessions,
+                  "Session id, or several (3,5,7 or 2-30): each needs a reference trajectory. With several, a "
+                  "per-flight table and the medians go to stderr, {flights, summary} to stdout")
+      ->required();
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
                   "recorded, else auto; docs/estimator.md, IMU axes)");
   cmd->add_option("--params", o->params, "PARAMS.json, e.g. from `imubridge identify`")->required();
   cmd->add_option("--baseline-train", o->baseline_train,
-                  "Also score the two-parameter linear least-squares drag fit a = -k v + b per axis (PX4's drag "
-                  "tuning), fitted on this window T0:T1 against the reference (\"linear_least_squares\")");
+                  "Also score the least-squares anchor: a = -k v + b per axis on 0.1-s means (PX4's drag tuning), "
+                  "fitted on this window against the reference, inverted raw and 1-s smoothed "
+                  "(\"least_squares_means\", \"least_squares_smoothed\")");
+  cmd->add_option("--baseline-session", o->baseline_session,
+                  "Fit the anchor on this session (default: each scored session itself), on --baseline-train or its "
+                  "whole span: a calibration carried to other flights, like the model's");
   add_in_flight_flag(*cmd, o->in_flight);
   add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--window", o->window,
