@@ -26,18 +26,6 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 // The end of the data: the last sample's time plus its period, so that [start, end) holds the last sample.
 double data_end(std::span<const double> t) { return t.size() > 1 ? 2.0 * t.back() - t[t.size() - 2] : t.back(); }
 
-TimeWindow clip(const TimeWindow& w, std::span<const double> t, const char* what) {
-  const TimeWindow clipped{std::max(w.start, t.front()), std::min(w.end, data_end(t))};
-  const auto first = std::lower_bound(t.begin(), t.end(), clipped.start);
-  if (!(clipped.start < clipped.end) || first == t.end() || !(*first < clipped.end)) {
-    char message[200];
-    std::snprintf(message, sizeof message, "%s window %.3f:%.3f s holds no data (the data span %.3f:%.3f s)", what,
-                  w.start, w.end, t.front(), data_end(t));
-    throw std::invalid_argument(message);
-  }
-  return clipped;
-}
-
 void require_reference(const ImuSeries& series, const char* what) {
   if (!series.reference) throw std::invalid_argument(std::string(what) + " needs a reference trajectory");
 }
@@ -195,6 +183,18 @@ FitReport identify_full(const std::vector<FullSample>& samples, const Windows& w
 }
 
 }  // namespace
+
+TimeWindow clip(const TimeWindow& w, std::span<const double> t, const char* what) {
+  const TimeWindow clipped{std::max(w.start, t.front()), std::min(w.end, data_end(t))};
+  const auto first = std::lower_bound(t.begin(), t.end(), clipped.start);
+  if (!(clipped.start < clipped.end) || first == t.end() || !(*first < clipped.end)) {
+    char message[200];
+    std::snprintf(message, sizeof message, "%s window %.3f:%.3f s holds no data (the data span %.3f:%.3f s)", what,
+                  w.start, w.end, t.front(), data_end(t));
+    throw std::invalid_argument(message);
+  }
+  return clipped;
+}
 
 TimeWindow data_span(std::span<const double> t) {
   if (t.empty()) throw std::invalid_argument("no samples");

@@ -50,6 +50,10 @@ TimeWindow parse_window(std::string_view text, const TimeWindow& span);
 // The data's span: from the first sample to the end of the last, [t_0, t_last + last period).
 TimeWindow data_span(std::span<const double> t);
 
+// `w` clipped to the data, [t_0, t_last + last period). Throws std::invalid_argument naming the window (`what`:
+// "fit", "validation", ...) and the data's span when nothing is left.
+TimeWindow clip(const TimeWindow& w, std::span<const double> t, const char* what);
+
 struct Windows {
   TimeWindow train, validate;
 };

@@ -1,6 +1,7 @@
 // `imubridge identify` and `imubridge evaluate` as a user runs them, on a session recorded by `imubridge sim`.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -23,8 +24,8 @@ using nlohmann::json;
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
 // One 60-s flight of the paper's scenario, recorded once for the whole suite (session 1), a session without a
-// reference trajectory (session 2), written through the store as an importer without ground truth would, and a
-// second flight of the scenario with another seed (session 3).
+// reference trajectory (session 2), written through the store as an importer without ground truth would, and two
+// more flights of the scenario with other seeds (sessions 3 and 4).
 class IdentifyCommand : public ::testing::Test {
  protected:
   static inline fs::path dir_;
@@ -49,8 +50,10 @@ class IdentifyCommand : public ::testing::Test {
         store.append_sample(session, s);
       }
     }
-    const CommandResult second = run_imubridge("sim --scenario paper --seed 2 --db " + db_);
-    ASSERT_EQ(second.exit_code, 0) << second.err;
+    for (const char* seed : {"2", "3"}) {
+      const CommandResult more = run_imubridge(std::string("sim --scenario paper --seed ") + seed + " --db " + db_);
+      ASSERT_EQ(more.exit_code, 0) << more.err;
+    }
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
@@ -190,6 +193,36 @@ TEST_F(IdentifyCommand, EvaluateCarriesTheLeastSquaresAnchorFromItsOwnSession) {
     EXPECT_LT(rmse["least_squares_smoothed"]["horizontal"], rmse["least_squares_means"]["horizontal"]);
     EXPECT_EQ((*e)["least_squares"]["blocks_scored"], 500);
   }
+}
+
+TEST_F(IdentifyCommand, FitsOneCalibrationOverSeveralFlightsAndValidatesItOnOthers) {
+  const CommandResult r =
+      identify("--session 1,3 --validate-session 4 --model paper --velocity reference --out " + out("set.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json p = read_json(out("set.json"));
+  for (const char* axis : {"x", "y"}) {
+    EXPECT_NEAR(p["paper"][axis]["r"].get<double>(), sim::kPaperR, 0.02 * sim::kPaperR) << axis;
+    EXPECT_NEAR(p["paper"][axis]["mu"].get<double>(), sim::kPaperMu, 0.05 * sim::kPaperMu) << axis;
+  }
+  // Fitted on two whole 60-s flights (with the gap between them), validated on the third.
+  const json& id = p["identification"];
+  EXPECT_NEAR(id["fit_windows"][0][0].get<double>(), 0.0, 1e-9);
+  EXPECT_GT(id["validation_windows"][0][0].get<double>(), 120.0);
+  // The conditions belong to no one flight of the set: named by the set, they fly on none of them.
+  const std::string flight = p["conditions"]["flight"];
+  EXPECT_TRUE(flight.starts_with("flights:imu:")) << flight;
+  EXPECT_EQ(std::count(flight.begin(), flight.end(), ','), 2) << flight;
+  EXPECT_NE(r.err.find("session 3 fits"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("session 4 validates"), std::string::npos) << r.err;
+
+  const std::string args = " --velocity reference --out " + out("set-bad.json");
+  expect_error(identify("--session 1,3" + args), 2, "--validate-session");
+  expect_error(identify("--session 1,3 --validate-session 3" + args), 2, "both fits and validates");
+  expect_error(identify("--session 1 --validate-session 2" + args), 2, "no reference trajectory");
+  expect_error(identify("--session 1,3 --validate-session 4 --velocity eq12 --out " + out("set-bad.json")), 2,
+               "takes one session");
+  expect_error(identify("--session 1,3 --validate-session 4 --train 0:4" + args), 2, "the fitting flights hold 8.0 s");
+  EXPECT_FALSE(fs::exists(out("set-bad.json")));
 }
 
 TEST_F(IdentifyCommand, BadInputGivesOneLineAndAnExitCode) {

@@ -17,10 +17,14 @@
 
 #include "daemon/command.hpp"
 #include "daemon/commands/reference_delay_option.hpp"
+#include "daemon/commands/session_list.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/filter_identification.hpp"
+#include "diagnose/residual_analysis.hpp"
+#include "diagnose/signals.hpp"
 #include "estimator/constants.hpp"
+#include "estimator/flight_set.hpp"
 #include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
@@ -35,8 +39,8 @@ namespace est = imubridge::estimator;
 namespace fs = std::filesystem;
 
 struct IdentifyCliOptions {
-  std::string db, out;
-  std::int64_t session = 0;
+  std::string db, out, sessions;
+  std::optional<std::string> validate_sessions;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
   std::optional<double> reference_delay;
@@ -82,12 +86,12 @@ void print_correlation(const est::Uncertainty& u) {
   }
 }
 
+// `source`: what the model was fitted on, "session 3 (link 3)" or the flights of a set.
 void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& result, est::VelocitySource velocity,
-                   std::int64_t link, double wall_seconds) {
+                   const std::string& source, double wall_seconds) {
   const est::Identification& id = result.params.identification;
-  std::fprintf(stderr, "identified the %s model by %s from session %lld (link %lld), velocity %s\n", o.model.c_str(),
-               id.method.c_str(), static_cast<long long>(o.session), static_cast<long long>(link),
-               std::string(est::name(velocity)).c_str());
+  std::fprintf(stderr, "identified the %s model by %s from %s, velocity %s\n", o.model.c_str(), id.method.c_str(),
+               source.c_str(), std::string(est::name(velocity)).c_str());
   for (const est::FitReport& fit : result.fits) {
     std::fprintf(stderr, "%s: train %.3f:%.3f s (%zu samples), validate %.3f:%.3f s (%zu samples)\n", fit.name.c_str(),
                  id.fit_windows[0].start, id.fit_windows[0].end, fit.fit_samples, id.validation_windows[0].start,
@@ -156,19 +160,19 @@ est::FullHold parse_hold(const std::vector<std::string>& names) {
   return hold;
 }
 
-int run(const IdentifyCliOptions& o) {
-  const auto start = std::chrono::steady_clock::now();
+est::IdentifyOptions identify_options(const IdentifyCliOptions& o) {
   est::IdentifyOptions options;
   options.model = est::parse_model(o.model);
   options.method = est::parse_method(o.method);
   if (o.velocity) options.velocity = est::parse_velocity(*o.velocity);
   options.ga = o.ga;
-  const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   options.hold = parse_hold(o.hold);
   if (!o.hold.empty() && options.model != est::ModelKind::full)
     throw std::invalid_argument("--hold applies to --model full only");
+  return options;
+}
 
-  const store::Store store(o.db, {.read_only = true});
+pipeline::SessionSeriesOptions reading_options(const IdentifyCliOptions& o, const est::IdentifyOptions& options) {
   pipeline::SessionSeriesOptions reading{.link = o.link,
                                          // Read when present in any case: the velocity the model gives is scored
                                          // against it (the filter's and eq. (12)'s fits never read it).
@@ -177,15 +181,155 @@ int run(const IdentifyCliOptions& o) {
                                                           : pipeline::ReferenceUse::when_present,
                                          .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
-  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
-  for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  if (!o.velocity)
-    options.velocity = session.series.reference ? est::VelocitySource::reference : est::VelocitySource::filter;
+  return reading;
+}
+
+// The velocity source when none was given (the reference when the data have one), and the GA refused where the
+// filter fits.
+void choose_velocity(const IdentifyCliOptions& o, est::IdentifyOptions& options, bool has_reference) {
+  if (!o.velocity) options.velocity = has_reference ? est::VelocitySource::reference : est::VelocitySource::filter;
   if (options.velocity == est::VelocitySource::filter && options.method != est::Method::lm)
     throw std::invalid_argument(
         o.velocity ? "--velocity filter fits by LM only (the GA would run the filter for every individual)"
-                   : "session has no reference, so the velocity is the filter's, which fits by LM only (the GA would "
+                   : "no reference, so the velocity is the filter's, which fits by LM only (the GA would "
                      "run the filter for every individual); --velocity eq12 runs the paper's GA on the IMU alone");
+}
+
+// Writes PARAMS.json (and the GA's curve) when the fit is plausible; else prints why not. Returns the exit status.
+int write_or_refuse(const IdentifyCliOptions& o, const est::IdentifyResult& result,
+                    const std::vector<est::Implausibility>& implausible) {
+  for (const std::string& line : est::negligible_drag(result.params.full)) std::printf("warning: %s\n", line.c_str());
+  if (!implausible.empty()) {
+    for (const est::Implausibility& i : implausible) std::printf("refused: implausible: %s\n", i.message.c_str());
+    std::fprintf(stderr,
+                 "identify: the fit is refused and %s is not written: no airframe has these values (a window without "
+                 "the manoeuvres that determine them, or wrong --imu-axes, are the usual causes)\n",
+                 o.out.c_str());
+    return 1;
+  }
+  return 0;
+}
+
+void save(const IdentifyCliOptions& o, const est::IdentifyResult& result) {
+  est::save_params(o.out, result.params);
+  if (!result.fits.front().convergence.empty()) {
+    const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
+    write_convergence(curve, result.fits);
+  }
+}
+
+// Several flights (--session A,B,C, --validate-session D,E): each cut to its window (--train of a fitting flight,
+// --validate of a validating one, each of its own flight), all joined into one series with long gaps between them
+// (estimator/flight_set.hpp), fitted on the first ones and validated on the others. The conditions (biases, wind)
+// fitted over several flights are no one flight's: PARAMS.json names the set, so they fly on none.
+int run_over_flights(const IdentifyCliOptions& o, std::vector<std::int64_t> fit_ids,
+                     std::vector<std::int64_t> validate_ids) {
+  const auto start = std::chrono::steady_clock::now();
+  if (validate_ids.empty())
+    throw std::invalid_argument(
+        "several sessions fit one calibration: name the flights that validate it with "
+        "--validate-session (e.g. --session 1,2,3 --validate-session 4,5)");
+  for (const std::int64_t id : validate_ids) {
+    if (std::find(fit_ids.begin(), fit_ids.end(), id) != fit_ids.end())
+      throw std::invalid_argument("session " + std::to_string(id) +
+                                  " both fits and validates: a calibration is validated on flights it was not "
+                                  "fitted on");
+  }
+  est::IdentifyOptions options = identify_options(o);
+  if (options.velocity == est::VelocitySource::eq12)
+    throw std::invalid_argument(
+        "--velocity eq12 takes one session: its open-loop integral would run from one flight "
+        "into the next");
+  const est::PlausibilityLimits limits = plausibility_limits(o.limits);
+  const store::Store store(o.db, {.read_only = true});
+  const pipeline::SessionSeriesOptions reading = reading_options(o, options);
+  std::vector<std::int64_t> ids = fit_ids;
+  ids.insert(ids.end(), validate_ids.begin(), validate_ids.end());
+  std::vector<est::ImuSeries> flights;
+  std::vector<est::TimeWindow> windows;
+  std::string identity = "flights:";
+  bool every_reference = true;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const pipeline::SessionSeries session = pipeline::read_session_series(store, ids[i], reading);
+    for (const std::string& w : session.warnings)
+      std::fprintf(stderr, "warning: session %lld: %s\n", static_cast<long long>(ids[i]), w.c_str());
+    const est::TimeWindow span = percent_span(session, o.windows.in_flight).window;
+    const std::optional<std::string>& text = i < fit_ids.size() ? o.windows.train : o.windows.validate;
+    const est::TimeWindow window = est::clip(text ? est::parse_window(*text, span) : span, session.series.t,
+                                             i < fit_ids.size() ? "fit" : "validation");
+    identity += (i == 0 ? "" : ",") + est::flight_identity(session.series);
+    every_reference = every_reference && session.series.reference.has_value();
+    flights.push_back(est::cut(session.series, window));
+    windows.push_back(window);
+  }
+  choose_velocity(o, options, every_reference);
+  // The filter error method averages blocks of samples by index: no block may straddle two flights.
+  const std::size_t align = options.velocity == est::VelocitySource::filter
+                                ? diagnose::identification_block(diagnose::sample_rate_hz(flights.front().t))
+                                : 1;
+  const est::FlightSet set = est::join_flights(flights, align);
+  double fit_seconds = 0.0;
+  for (std::size_t i = 0; i < fit_ids.size(); ++i) fit_seconds += set.placed[i].end - set.placed[i].start;
+  if (fit_seconds < est::kMinTrainSeconds) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "the fitting flights hold %.1f s of data; identifying the drag needs at least %g s: give more or "
+                  "longer flights",
+                  fit_seconds, est::kMinTrainSeconds);
+    throw std::invalid_argument(text);
+  }
+  options.train = est::TimeWindow{set.placed.front().start, set.placed[fit_ids.size() - 1].end};
+  options.validate = est::TimeWindow{set.placed[fit_ids.size()].start, set.placed.back().end};
+  est::IdentifyResult result = options.velocity == est::VelocitySource::filter
+                                   ? diagnose::identify_by_filter_error(set.series, options)
+                                   : est::identify(set.series, options);
+  result.params.conditions_flight = identity;
+  const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
+  if (implausible.empty()) save(o, result);
+
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::string source = "sessions ";
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    if (i == fit_ids.size())
+      source += " (validation: ";
+    else if (i > 0)
+      source += ",";
+    source += std::to_string(ids[i]);
+  }
+  source += ")";
+  print_summary(o, result, options.velocity, source, wall);
+  std::fprintf(stderr, "the flights, one after another with %g s between them (the windows above are in this time):\n",
+               est::kFlightGapSeconds);
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    std::fprintf(stderr, "  session %lld %s: %.3f:%.3f s of its own, %.3f:%.3f s here\n",
+                 static_cast<long long>(ids[i]), i < fit_ids.size() ? "fits" : "validates", windows[i].start,
+                 windows[i].start + (set.placed[i].end - set.placed[i].start), set.placed[i].start, set.placed[i].end);
+  }
+  const int status = write_or_refuse(o, result, implausible);
+  if (status == 0) {
+    std::string listed;
+    for (const std::int64_t id : validate_ids) listed += (listed.empty() ? "" : ",") + std::to_string(id);
+    std::fprintf(stderr,
+                 "the velocity on each validating flight: imubridge evaluate --db %s --session %s --params %s\n",
+                 o.db.c_str(), listed.c_str(), o.out.c_str());
+  }
+  return status;
+}
+
+int run(const IdentifyCliOptions& o) {
+  const std::vector<std::int64_t> fit_ids = parse_session_list(o.sessions);
+  std::vector<std::int64_t> validate_ids;
+  if (o.validate_sessions) validate_ids = parse_session_list(*o.validate_sessions);
+  if (fit_ids.size() > 1 || !validate_ids.empty()) return run_over_flights(o, fit_ids, validate_ids);
+  const std::int64_t session_id = fit_ids.front();
+  const auto start = std::chrono::steady_clock::now();
+  est::IdentifyOptions options = identify_options(o);
+  const est::PlausibilityLimits limits = plausibility_limits(o.limits);
+
+  const store::Store store(o.db, {.read_only = true});
+  const pipeline::SessionSeries session = pipeline::read_session_series(store, session_id, reading_options(o, options));
+  for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  choose_velocity(o, options, session.series.reference.has_value());
   std::tie(options.train, options.validate) = o.windows.resolve(session);
   est::IdentifyResult result = options.velocity == est::VelocitySource::filter
                                    ? diagnose::identify_by_filter_error(session.series, options)
@@ -194,17 +338,12 @@ int run(const IdentifyCliOptions& o) {
 
   // Refused, not warned about: a model no airframe has flies worse than none (docs/identification.md, "Plausibility").
   const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
-  if (implausible.empty()) {
-    est::save_params(o.out, result.params);
-    if (!result.fits.front().convergence.empty()) {
-      const fs::path curve = fs::path(o.out).replace_extension(".convergence.csv");
-      write_convergence(curve, result.fits);
-    }
-  }
+  if (implausible.empty()) save(o, result);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
   print_reference_delay(session);  // with the summary: an error before it stays one line
-  print_summary(o, result, options.velocity, session.link_id, wall);
+  print_summary(o, result, options.velocity,
+                "session " + std::to_string(session_id) + " (link " + std::to_string(session.link_id) + ")", wall);
   if (options.velocity == est::VelocitySource::eq12) {
     if (const auto drift = est::eq12_drift_warning(session.series, result.params.full.mounting,
                                                    result.params.identification.fit_windows.front()))
@@ -219,23 +358,20 @@ int run(const IdentifyCliOptions& o) {
     std::printf("zero velocity scores train %.3f, validation %.3f m/s (horizontal)\n", zero.train.horizontal,
                 zero.validation.horizontal);
   }
-  for (const std::string& line : est::negligible_drag(result.params.full)) std::printf("warning: %s\n", line.c_str());
-  if (!implausible.empty()) {
-    for (const est::Implausibility& i : implausible) std::printf("refused: implausible: %s\n", i.message.c_str());
-    std::fprintf(stderr,
-                 "identify: the fit is refused and %s is not written: no airframe has these values (a window without "
-                 "the manoeuvres that determine them, or wrong --imu-axes, are the usual causes)\n",
-                 o.out.c_str());
-    return 1;
-  }
-  return 0;
+  return write_or_refuse(o, result, implausible);
 }
 
 const RegisterCommand kIdentify([](CLI::App& app) -> CommandRunner {
   auto o = std::make_shared<IdentifyCliOptions>();
   auto* cmd = app.add_subcommand("identify", "Fit the accelerometer model to a recorded session; write PARAMS.json");
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
-  cmd->add_option("--session", o->session, "Session id")->required();
+  cmd->add_option("--session", o->sessions,
+                  "Session id; or several flights of one vehicle (1,2,3 or 1-3) fitted together, with "
+                  "--validate-session")
+      ->required();
+  cmd->add_option("--validate-session", o->validate_sessions,
+                  "Flights that validate a calibration fitted on --session's (4,5 or 4-9): the windows then apply to "
+                  "each flight, --train to the fitting ones and --validate to these (default: each whole flight)");
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
