@@ -23,10 +23,13 @@ class DiagnoseCommand : public ::testing::Test {
     dir_ = fs::temp_directory_path() / ("imubridge_diagnose_" + std::to_string(::getpid()));
     fs::create_directories(dir_);
     db_ = (dir_ / "flight.db").string();
-    // The paper's flight with an accelerometer lagging the gyro by 10 ms: something to find.
-    const CommandResult r =
-        run_imubridge("sim --scenario paper --seed 3 --duration 30 --effect time_offset=0.01 --db " + db_);
-    ASSERT_EQ(r.exit_code, 0) << r.err;
+    // The paper's flight with an accelerometer lagging the gyro by 10 ms: something to find (session 1); two more
+    // flights of the same vehicle (sessions 2 and 3).
+    for (const char* seed : {"3", "4", "5"}) {
+      const CommandResult r = run_imubridge(std::string("sim --scenario paper --seed ") + seed +
+                                            " --duration 30 --effect time_offset=0.01 --db " + db_);
+      ASSERT_EQ(r.exit_code, 0) << r.err;
+    }
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
@@ -45,7 +48,7 @@ TEST_F(DiagnoseCommand, WritesTheReport) {
       diagnose("--session 1 --train 0:20 --validate 20:30 --max-steps 1 --report " + report.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("step 1: + time_offset"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("velocity RMSE"), std::string::npos) << r.out;  // the user's units, beside m/s^2
+  EXPECT_NE(r.out.find("velocity RMSE"), std::string::npos) << r.out;    // the user's units, beside m/s^2
   EXPECT_EQ(r.err.find("covariance_impl"), std::string::npos) << r.err;  // no raw Ceres log lines
   ASSERT_TRUE(fs::exists(report / "report.html"));
   const json j = json::parse(slurp(report / "report.json"));
@@ -68,8 +71,10 @@ TEST_F(DiagnoseCommand, WritesTheReport) {
 TEST_F(DiagnoseCommand, ACandidateBeyondThePlausibilityTableIsRefusedWithItsReason) {
   // The flight's 10-ms offset is found when allowed (WritesTheReport); with a 1-ms limit it is implausible.
   const fs::path report = dir_ / "limited";
-  const CommandResult r = diagnose("--session 1 --train 0:20 --validate 20:30 --max-steps 1 --limit time_offset=0.001 "
-                                   "--report " + report.string());
+  const CommandResult r = diagnose(
+      "--session 1 --train 0:20 --validate 20:30 --max-steps 1 --limit time_offset=0.001 "
+      "--report " +
+      report.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const json j = json::parse(slurp(report / "report.json"));
   const json& candidates = j["steps"].empty() ? j["last_candidates"] : j["steps"][0]["candidates"];
@@ -87,13 +92,29 @@ TEST_F(DiagnoseCommand, ACandidateBeyondThePlausibilityTableIsRefusedWithItsReas
 
 TEST_F(DiagnoseCommand, ImuAloneWhenAsked) {
   const fs::path report = dir_ / "imu";
-  const CommandResult r = diagnose("--session 1 --axis x --velocity imu --train 0:20 --max-steps 0 --report " +
-                                   report.string());
+  const CommandResult r =
+      diagnose("--session 1 --axis x --velocity imu --train 0:20 --max-steps 0 --report " + report.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const json j = json::parse(slurp(report / "report.json"));
   EXPECT_EQ(j["velocity_source"], "imu");
   EXPECT_EQ(j["axes"], json::array({"x"}));
   EXPECT_TRUE(j["steps"].empty());
+}
+
+TEST_F(DiagnoseCommand, SeveralFlightsFitTogetherAndValidateOnAnother) {
+  const fs::path params = dir_ / "set.json";
+  const CommandResult r = diagnose("--session 1,2 --validate-session 3 --max-steps 1 --out " + params.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("step 1: + time_offset"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("session 2 fits"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("session 3 validates"), std::string::npos) << r.out;
+  const json p = json::parse(slurp(params));
+  EXPECT_NEAR(p["full"]["time_offset"].get<double>(), 0.01, 0.001);
+  EXPECT_TRUE(p["conditions"]["flight"].get<std::string>().starts_with("flights:imu:")) << p["conditions"];
+
+  expect_error(diagnose("--session 1,2"), "--validate-session");
+  expect_error(diagnose("--session 1 --validate-session 1"), "both fits and validates");
+  expect_error(diagnose("--session 1,2 --validate-session 3 --velocity imu"), "takes one session");
 }
 
 TEST_F(DiagnoseCommand, BadInputIsOneLineAndExitCode2) {
@@ -110,8 +131,8 @@ TEST_F(DiagnoseCommand, BadInputIsOneLineAndExitCode2) {
 TEST_F(DiagnoseCommand, OutAloneWritesTheModelWithoutAReport) {
   const fs::path params = dir_ / "model_only" / "PARAMS.json";
   fs::create_directories(params.parent_path());
-  const CommandResult r = diagnose("--session 1 --axis x --train 0:20 --validate 20:30 --max-steps 0 --out " +
-                                   params.string());
+  const CommandResult r =
+      diagnose("--session 1 --axis x --train 0:20 --validate 20:30 --max-steps 0 --out " + params.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const json model = json::parse(slurp(params));
   EXPECT_TRUE(model.is_object() && !model.empty()) << model.dump();

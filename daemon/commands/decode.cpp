@@ -1,13 +1,12 @@
 // `imubridge decode`: print every frame of a capture as one JSON object per line, then the decoder's counters on
 // stderr. For inspecting what a radio or flight controller actually sends.
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
-
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -154,7 +153,8 @@ int run_decode(const DecodeOptions& options) {
 
 const RegisterCommand kDecode([](CLI::App& app) -> CommandRunner {
   auto options = std::make_shared<DecodeOptions>();
-  auto* cmd = app.add_subcommand("decode", "Decode a capture file: one JSON object per frame on stdout, counters on stderr");
+  auto* cmd =
+      app.add_subcommand("decode", "Decode a capture file: one JSON object per frame on stdout, counters on stderr");
   cmd->add_option("--protocol,-p", options->protocol, "Wire format of the capture")
       ->check(CLI::IsMember({"imubridge", "xbee", "xbee-escaped", "mavlink"}))
       ->capture_default_str();

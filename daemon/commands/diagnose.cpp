@@ -1,7 +1,7 @@
 // `imubridge diagnose`: fit the base model to a recorded session, analyse what its residual still holds, add the
 // library's effects one at a time while they lower the validation error significantly, and write DIR/report.json
-// and DIR/report.html with --report DIR (docs/effects.md), and with --out the final model as PARAMS.json. A short summary for people
-// goes to stdout.
+// and DIR/report.html with --report DIR (docs/effects.md), and with --out the final model as PARAMS.json. A short
+// summary for people goes to stdout.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -18,11 +18,15 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/flight_set_reading.hpp"
 #include "daemon/commands/reference_delay_option.hpp"
+#include "daemon/commands/session_list.hpp"
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/report.hpp"
+#include "diagnose/residual_analysis.hpp"
 #include "diagnose/search.hpp"
+#include "diagnose/signals.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/params.hpp"
 #include "pipeline/session_series.hpp"
@@ -37,7 +41,8 @@ namespace est = imubridge::estimator;
 struct DiagnoseCliOptions {
   std::string db;
   std::optional<std::string> report;
-  std::int64_t session = 0;
+  std::string sessions;
+  std::optional<std::string> validate_sessions;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
   std::optional<double> reference_delay;
@@ -163,8 +168,10 @@ void print_final_model(const est::ModelParams& p) {
   if (p.identification.process_noise > 0.0)
     std::printf("    %-22s %12.6g %-12s %s\n", "process_noise", p.identification.process_noise, "", "m/s^2/sqrt(Hz)");
   const std::string conditions = est::describe_conditions(f);
-  std::printf("  the conditions of this flight (%s), left behind on any other: %s\n", p.conditions_flight.c_str(),
-              conditions.empty() ? "none" : conditions.c_str());
+  std::printf(p.conditions_flight.starts_with("flights:")
+                  ? "  the conditions fitted over these flights (%s), flown on none: %s\n"
+                  : "  the conditions of this flight (%s), left behind on any other: %s\n",
+              p.conditions_flight.c_str(), conditions.empty() ? "none" : conditions.c_str());
   vector("wind", f.wind, "m/s", true);
   vector("accel_bias", f.accel_bias, "m/s^2", true);
   vector("gyro_bias", f.gyro_bias, "rad/s", true);
@@ -235,7 +242,13 @@ int run(const DiagnoseCliOptions& o) {
   options.judge_by_flight = o.judge_by_flight;
   if (o.lowpass_hz < 0.0) throw std::invalid_argument("--lowpass must be a positive frequency in Hz (0: off)");
   options.lowpass_hz = o.lowpass_hz;
-  options.session = o.db + "#" + std::to_string(o.session);
+  const std::vector<std::int64_t> fit_ids = parse_session_list(o.sessions);
+  std::vector<std::int64_t> validate_ids;
+  if (o.validate_sessions) validate_ids = parse_session_list(*o.validate_sessions);
+  const bool several = fit_ids.size() > 1 || !validate_ids.empty();
+  if (several && options.velocity == dg::VelocitySource::eq12)
+    throw std::invalid_argument(
+        "--velocity imu takes one session: its open-loop integral would run from one flight into the next");
 
   const store::Store store(o.db, {.read_only = true});
   // The reference when the session has one, unless told otherwise. The filter's fit never reads it; a reference
@@ -247,22 +260,45 @@ int run(const DiagnoseCliOptions& o) {
                                                                                       : ReferenceUse::none;
   pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
-  const pipeline::SessionSeries session = pipeline::read_session_series(store, o.session, reading);
-  if (!options.velocity)
-    options.velocity = session.series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
-  std::tie(options.train, options.validate) = o.windows.resolve(session);
+  // One session, or several flights joined (daemon/commands/flight_set_reading.hpp).
+  std::optional<pipeline::SessionSeries> session;
+  std::optional<FlightSetReading> flights;
+  std::optional<JoinedFlights> joined;
+  if (several) {
+    flights = read_flight_set(store, fit_ids, validate_ids, reading, o.windows);
+    if (!options.velocity)
+      options.velocity = flights->every_reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
+    // The filter error method averages blocks of samples by index: no block may straddle two flights.
+    joined = join(*flights, *options.velocity == dg::VelocitySource::filter
+                                ? dg::identification_block(dg::sample_rate_hz(flights->flights.front().t))
+                                : 1);
+    options.train = joined->train;
+    options.validate = joined->validate;
+    options.session = o.db + "#" + o.sessions + (o.validate_sessions ? "/" + *o.validate_sessions : "");
+  } else {
+    session = pipeline::read_session_series(store, fit_ids.front(), reading);
+    if (!options.velocity)
+      options.velocity = session->series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
+    std::tie(options.train, options.validate) = o.windows.resolve(*session);
+    options.session = o.db + "#" + std::to_string(fit_ids.front());
+  }
   // Progress on a terminal only: a log file or a pipe gets the summary alone.
   const bool show_progress = isatty(STDERR_FILENO) == 1;
   if (show_progress)
     options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
-  dg::Diagnosis diagnosis = dg::run_diagnosis(session.series, options);
+  dg::Diagnosis diagnosis = dg::run_diagnosis(several ? joined->set.series : session->series, options);
   if (show_progress) TerminalProgress::clear();
-  diagnosis.imu_axes = session.axes.description;
-  diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
-
-  diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
-  print_reference_delay(session);  // with the summary: an error before it stays one line
+  if (several) {
+    // Conditions fitted over several flights are no one flight's: named by the set, they fly on none.
+    diagnosis.final_params.conditions_flight = flights->identity;
+  } else {
+    diagnosis.imu_axes = session->axes.description;
+    diagnosis.warnings.insert(diagnosis.warnings.begin(), session->warnings.begin(), session->warnings.end());
+    diagnosis.final_params.identification.reference_delay = recorded_reference_delay(*session);
+    print_reference_delay(*session);  // with the summary: an error before it stays one line
+  }
   print_summary(diagnosis);
+  if (several) print_flight_map(stdout, *flights, *joined);
   if (o.report) {
     const std::filesystem::path dir(*o.report);
     std::filesystem::create_directories(dir);
@@ -288,7 +324,13 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   auto* cmd = app.add_subcommand("diagnose",
                                  "Find what the accelerometer model misses: fit it, analyse the residual, add effects");
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
-  cmd->add_option("--session", o->session, "Session id")->required();
+  cmd->add_option("--session", o->sessions,
+                  "Session id; or several flights of one vehicle (1,2,3 or 1-3) diagnosed together, with "
+                  "--validate-session")
+      ->required();
+  cmd->add_option("--validate-session", o->validate_sessions,
+                  "Flights that validate each step, not fitted on (4,5 or 4-9): the windows then apply to each "
+                  "flight, --train to the fitting ones and --validate to these (default: each whole flight)");
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "daemon/command.hpp"
+#include "daemon/commands/flight_set_reading.hpp"
 #include "daemon/commands/reference_delay_option.hpp"
 #include "daemon/commands/session_list.hpp"
 #include "daemon/commands/session_windows.hpp"
@@ -24,7 +25,6 @@
 #include "diagnose/residual_analysis.hpp"
 #include "diagnose/signals.hpp"
 #include "estimator/constants.hpp"
-#include "estimator/flight_set.hpp"
 #include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
 #include "estimator/velocity_scores.hpp"
@@ -218,93 +218,38 @@ void save(const IdentifyCliOptions& o, const est::IdentifyResult& result) {
   }
 }
 
-// Several flights (--session A,B,C, --validate-session D,E): each cut to its window (--train of a fitting flight,
-// --validate of a validating one, each of its own flight), all joined into one series with long gaps between them
-// (estimator/flight_set.hpp), fitted on the first ones and validated on the others. The conditions (biases, wind)
-// fitted over several flights are no one flight's: PARAMS.json names the set, so they fly on none.
-int run_over_flights(const IdentifyCliOptions& o, std::vector<std::int64_t> fit_ids,
-                     std::vector<std::int64_t> validate_ids) {
+// Several flights (--session A,B,C, --validate-session D,E; daemon/commands/flight_set_reading.hpp), fitted on the
+// first ones and validated on the others. The conditions (biases, wind) fitted over several flights are no one
+// flight's: PARAMS.json names the set, so they fly on none.
+int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t>& fit_ids,
+                     const std::vector<std::int64_t>& validate_ids) {
   const auto start = std::chrono::steady_clock::now();
-  if (validate_ids.empty())
-    throw std::invalid_argument(
-        "several sessions fit one calibration: name the flights that validate it with "
-        "--validate-session (e.g. --session 1,2,3 --validate-session 4,5)");
-  for (const std::int64_t id : validate_ids) {
-    if (std::find(fit_ids.begin(), fit_ids.end(), id) != fit_ids.end())
-      throw std::invalid_argument("session " + std::to_string(id) +
-                                  " both fits and validates: a calibration is validated on flights it was not "
-                                  "fitted on");
-  }
   est::IdentifyOptions options = identify_options(o);
   if (options.velocity == est::VelocitySource::eq12)
     throw std::invalid_argument(
-        "--velocity eq12 takes one session: its open-loop integral would run from one flight "
-        "into the next");
+        "--velocity eq12 takes one session: its open-loop integral would run from one flight into the next");
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeriesOptions reading = reading_options(o, options);
-  std::vector<std::int64_t> ids = fit_ids;
-  ids.insert(ids.end(), validate_ids.begin(), validate_ids.end());
-  std::vector<est::ImuSeries> flights;
-  std::vector<est::TimeWindow> windows;
-  std::string identity = "flights:";
-  bool every_reference = true;
-  for (std::size_t i = 0; i < ids.size(); ++i) {
-    const pipeline::SessionSeries session = pipeline::read_session_series(store, ids[i], reading);
-    for (const std::string& w : session.warnings)
-      std::fprintf(stderr, "warning: session %lld: %s\n", static_cast<long long>(ids[i]), w.c_str());
-    const est::TimeWindow span = percent_span(session, o.windows.in_flight).window;
-    const std::optional<std::string>& text = i < fit_ids.size() ? o.windows.train : o.windows.validate;
-    const est::TimeWindow window = est::clip(text ? est::parse_window(*text, span) : span, session.series.t,
-                                             i < fit_ids.size() ? "fit" : "validation");
-    identity += (i == 0 ? "" : ",") + est::flight_identity(session.series);
-    every_reference = every_reference && session.series.reference.has_value();
-    flights.push_back(est::cut(session.series, window));
-    windows.push_back(window);
-  }
-  choose_velocity(o, options, every_reference);
+  const FlightSetReading flights =
+      read_flight_set(store, fit_ids, validate_ids, reading_options(o, options), o.windows);
+  choose_velocity(o, options, flights.every_reference);
   // The filter error method averages blocks of samples by index: no block may straddle two flights.
   const std::size_t align = options.velocity == est::VelocitySource::filter
-                                ? diagnose::identification_block(diagnose::sample_rate_hz(flights.front().t))
+                                ? diagnose::identification_block(diagnose::sample_rate_hz(flights.flights.front().t))
                                 : 1;
-  const est::FlightSet set = est::join_flights(flights, align);
-  double fit_seconds = 0.0;
-  for (std::size_t i = 0; i < fit_ids.size(); ++i) fit_seconds += set.placed[i].end - set.placed[i].start;
-  if (fit_seconds < est::kMinTrainSeconds) {
-    char text[200];
-    std::snprintf(text, sizeof text,
-                  "the fitting flights hold %.1f s of data; identifying the drag needs at least %g s: give more or "
-                  "longer flights",
-                  fit_seconds, est::kMinTrainSeconds);
-    throw std::invalid_argument(text);
-  }
-  options.train = est::TimeWindow{set.placed.front().start, set.placed[fit_ids.size() - 1].end};
-  options.validate = est::TimeWindow{set.placed[fit_ids.size()].start, set.placed.back().end};
+  const JoinedFlights joined = join(flights, align);
+  options.train = joined.train;
+  options.validate = joined.validate;
   est::IdentifyResult result = options.velocity == est::VelocitySource::filter
-                                   ? diagnose::identify_by_filter_error(set.series, options)
-                                   : est::identify(set.series, options);
-  result.params.conditions_flight = identity;
+                                   ? diagnose::identify_by_filter_error(joined.set.series, options)
+                                   : est::identify(joined.set.series, options);
+  result.params.conditions_flight = flights.identity;
   const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
   if (implausible.empty()) save(o, result);
 
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::string source = "sessions ";
-  for (std::size_t i = 0; i < ids.size(); ++i) {
-    if (i == fit_ids.size())
-      source += " (validation: ";
-    else if (i > 0)
-      source += ",";
-    source += std::to_string(ids[i]);
-  }
-  source += ")";
-  print_summary(o, result, options.velocity, source, wall);
-  std::fprintf(stderr, "the flights, one after another with %g s between them (the windows above are in this time):\n",
-               est::kFlightGapSeconds);
-  for (std::size_t i = 0; i < ids.size(); ++i) {
-    std::fprintf(stderr, "  session %lld %s: %.3f:%.3f s of its own, %.3f:%.3f s here\n",
-                 static_cast<long long>(ids[i]), i < fit_ids.size() ? "fits" : "validates", windows[i].start,
-                 windows[i].start + (set.placed[i].end - set.placed[i].start), set.placed[i].start, set.placed[i].end);
-  }
+  print_summary(o, result, options.velocity, describe_sessions(flights), wall);
+  print_flight_map(stderr, flights, joined);
   const int status = write_or_refuse(o, result, implausible);
   if (status == 0) {
     std::string listed;

@@ -52,7 +52,8 @@ auto import_with_progress(const ImportCommandOptions& o, ImportOptions& options,
   return r;
 }
 
-// What ulog, tlog and dataflash take of the shared options: the resolutions and axes only where given, else their own defaults.
+// What ulog, tlog and dataflash take of the shared options: the resolutions and axes only where given, else their own
+// defaults.
 template <typename ImportOptions>
 void apply_given(const ImportCommandOptions& o, ImportOptions& options) {
   if (o.accel_lsb_given) options.accel_lsb = o.accel_lsb;
@@ -97,7 +98,8 @@ void print_gaps(const replay::Gaps& gaps) {
     return;
   }
   const auto longest = std::ranges::max_element(gaps.holes, {}, &replay::Gap::seconds);
-  std::fprintf(stderr, "warning: %zu %s without IMU samples over %g s (%.1f s in all; the longest %.1f s, %.1f-%.1f s)\n",
+  std::fprintf(stderr,
+               "warning: %zu %s without IMU samples over %g s (%.1f s in all; the longest %.1f s, %.1f-%.1f s)\n",
                gaps.holes.size(), gaps.holes.size() == 1 ? "gap" : "gaps", gaps.threshold_s, gaps.seconds(),
                longest->seconds(), static_cast<double>(longest->from_ns - gaps.session_start_ns) * 1e-9,
                static_cast<double>(longest->to_ns - gaps.session_start_ns) * 1e-9);
@@ -107,8 +109,7 @@ void print_damage(const ImportCommandOptions& o, const std::optional<std::string
   if (damage) std::fprintf(stderr, "warning: %s is damaged: %s; %s\n", o.dir.c_str(), damage->c_str(), kept);
 }
 
-void print_reference(const ImportCommandOptions& o, std::uint64_t rows, const std::string& source,
-                     const char* none) {
+void print_reference(const ImportCommandOptions& o, std::uint64_t rows, const std::string& source, const char* none) {
   if (o.no_reference) {
     std::fprintf(stderr, "no reference trajectory (--no-reference)\n");
   } else if (rows == 0) {
@@ -202,8 +203,9 @@ int run_import_tlog(const ImportCommandOptions& o) {
   const auto r = import_with_progress(o, options, replay::import_tlog);
   print_imported_log(o, r);
   std::fprintf(stderr, "%llu records, every frame kept as received%s\n", static_cast<unsigned long long>(r.records),
-               r.unverified_summary ? ("; valid frames nothing here can check, kept unchecked: " + *r.unverified_summary).c_str()
-                                    : "");
+               r.unverified_summary
+                   ? ("; valid frames nothing here can check, kept unchecked: " + *r.unverified_summary).c_str()
+                   : "");
   print_axes(r.axes);
   for (const auto& [reason, count] : r.skipped) {
     std::fprintf(stderr, "skipped %llu IMU messages: %s\n", static_cast<unsigned long long>(count), reason.c_str());
@@ -213,8 +215,7 @@ int run_import_tlog(const ImportCommandOptions& o) {
                  "warning: %llu samples with a value at the end of its field's range (clipped by the sender?)\n",
                  static_cast<unsigned long long>(r.clipped));
   }
-  print_reference(o, r.reference_rows, r.reference_source,
-                  "LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE");
+  print_reference(o, r.reference_rows, r.reference_source, "LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE");
   print_reference_skipped(r.reference_skipped);
   std::fprintf(stderr, "events: %llu STATUSTEXT messages, %llu gaps in the log's time over %g s (%.1f s)%s\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.log_gaps),
@@ -290,10 +291,10 @@ const RegisterCommand kImport([](CLI::App& app) -> CommandRunner {
       ->capture_default_str();
   cmd->add_option("--db", o->db, "The session store to import into")->capture_default_str();
   auto* imu_axes =
-      cmd->add_option(
-             "--imu-axes", o->imu_axes,
-             "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
-             "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes); ulog, tlog, dataflash: frd")
+      cmd->add_option("--imu-axes", o->imu_axes,
+                      "The IMU's axes, recorded with the session: auto (from gravity), frd, flu, x-up (EuRoC's "
+                      "ADIS16448), R:r00,...,r22 or q:w,x,y,z (IMU -> body; docs/estimator.md, IMU axes); ulog, tlog, "
+                      "dataflash: frd")
           ->capture_default_str();
   auto* accel_lsb =
       cmd->add_option("--accel-lsb", o->accel_lsb,

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <optional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -118,7 +118,8 @@ nlohmann::json describe(const SimOptions& o, const sim::SimConfig& config) {
 void refuse_reference_effects(const sim::SimConfig& config, const char* output) {
   if (!config.reference.is_truth())
     throw std::invalid_argument(std::string("the reference_delay, reference_rate and reference_quantum effects apply "
-                                            "to --db only, not ") + output);
+                                            "to --db only, not ") +
+                                output);
 }
 
 // The flight as a session: the bytes a ground station would have received, through the session engine and the

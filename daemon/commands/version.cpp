@@ -1,6 +1,5 @@
 // `imubridge version`: the software version, as sessions record it.
 #include <CLI/CLI.hpp>
-
 #include <cstdio>
 
 #include "daemon/command.hpp"
