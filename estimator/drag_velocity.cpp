@@ -37,7 +37,11 @@ bool finite(const ImuSample& s) { return std::isfinite(s.t) && s.gyro.allFinite(
 
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base) {
   if (params.identification.process_noise > 0.0) base.accel_process_noise = params.identification.process_noise;
-  if (params.transferred) base.accel_offset_std = std::max(base.accel_offset_std, kTransferredOffsetStd);
+  if (params.transferred) {
+    // Measured on the flights that validated the calibration when it was (params.hpp), else a MEMS datasheet's.
+    base.accel_offset_std =
+        std::max(base.accel_offset_std, params.identification.transfer_offset_std.value_or(kTransferredOffsetStd));
+  }
   const auto& rmse = params.identification.rmse;
   // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).
   for (const char* model : {"full", "paper"}) {

@@ -49,7 +49,8 @@ struct DragVelocityConfig {
 // identification fitted (the filter error method) replaces base's.
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base = {});
 // A consumer MEMS accelerometer's zero-g offset (0.02-0.06 g): what a calibration carried to another flight does not
-// know of that flight's, m/s^2.
+// know of that flight's, m/s^2, unless the calibration measured it on its validating flights
+// (Identification::transfer_offset_std).
 inline constexpr double kTransferredOffsetStd = 0.3;
 
 struct DragVelocityEstimate {
@@ -61,7 +62,7 @@ struct DragVelocityEstimate {
   // Filtered body-frame horizontal velocity, m/s, weighed against rest (accel_offset_std, rest_speed_std), and its
   // variance, which counts the offset's share: the error it reports is the error it has.
   Eigen::Vector2d v = Eigen::Vector2d::Zero();
-  Eigen::Vector2d v_var = Eigen::Vector2d::Zero();  // (m/s)^2
+  Eigen::Vector2d v_var = Eigen::Vector2d::Zero();      // (m/s)^2
   Eigen::Vector2d gyro_bias = Eigen::Vector2d::Zero();  // estimated body x, y gyro bias, rad/s
   // The one-step prediction, per axis just before that axis's measurement is fused (x first, then y): the body-axis
   // air velocity the drag law saw (m/s), and the innovation f - drag(it) (m/s^2). The filter error method

@@ -34,7 +34,7 @@ constexpr std::string_view kVibrationRefusal =
     "noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with --lowpass or "
     "--ignore-band";
 
-constexpr std::array<std::string_view, 6> kTopKeys = {"version", "paper",   "full",
+constexpr std::array<std::string_view, 6> kTopKeys = {"version",    "paper",   "full",
                                                       "conditions", "effects", "identification"};
 // The flight's conditions (params.hpp): written in "conditions", still read from "full" in files written before.
 constexpr std::array<std::string_view, 7> kConditionKeys = {
@@ -44,8 +44,9 @@ constexpr std::array<std::string_view, 6> kPaperAxisKeys = {"r", "beta", "beta_d
 constexpr std::array<std::string_view, 13> kFullKeys = {
     "lever_arm",   "mounting",  "mounting_deg", "drag_linear", "drag_quadratic", "accel_bias",      "accel_scale",
     "accel_cross", "gyro_bias", "time_offset",  "wind",        "wind_heading",   "wind_heading_deg"};
-constexpr std::array<std::string_view, 8> kIdentificationKeys = {
-    "method", "seed", "fit_windows", "validation_windows", "std_errors", "rmse", "process_noise", "reference_delay"};
+constexpr std::array<std::string_view, 9> kIdentificationKeys = {
+    "method", "seed",          "fit_windows",     "validation_windows", "std_errors",
+    "rmse",   "process_noise", "reference_delay", "transfer_offset_std"};
 
 std::string join(const std::string& path, std::string_view key) {
   return path.empty() ? std::string(key) : path + "." + std::string(key);
@@ -228,7 +229,8 @@ void read_conditions(const json& j, const std::string& path, FullModelParams& p,
                      bool& transferred) {
   check_object(j, path, kConditionKeys);
   if (j.contains("flight")) flight = get<std::string>(j.at("flight"), join(path, "flight"), "a string");
-  if (j.contains("transferred")) transferred = get<bool>(j.at("transferred"), join(path, "transferred"), "true or false");
+  if (j.contains("transferred"))
+    transferred = get<bool>(j.at("transferred"), join(path, "transferred"), "true or false");
   if (j.contains("wind")) p.wind = vector<2>(j.at("wind"), join(path, "wind"));
   p.wind_heading = angle_at(j, path, "wind_heading", p.wind_heading, number);
   if (j.contains("accel_bias")) p.accel_bias = vector<3>(j.at("accel_bias"), join(path, "accel_bias"));
@@ -260,6 +262,12 @@ Identification read_identification(const json& j, const std::string& path) {
     id.reference_delay = get<double>(j.at("reference_delay"), join(path, "reference_delay"), "a number");
     if (!std::isfinite(*id.reference_delay))
       throw std::invalid_argument("PARAMS.json: " + join(path, "reference_delay") + " must be a finite number (s)");
+  }
+  if (j.contains("transfer_offset_std")) {
+    id.transfer_offset_std = get<double>(j.at("transfer_offset_std"), join(path, "transfer_offset_std"), "a number");
+    if (!(*id.transfer_offset_std >= 0.0) || !std::isfinite(*id.transfer_offset_std))
+      throw std::invalid_argument("PARAMS.json: " + join(path, "transfer_offset_std") +
+                                  " must be a finite number >= 0 (m/s^2)");
   }
   return id;
 }
@@ -348,6 +356,7 @@ void to_json(json& j, const Identification& id) {
            {"rmse", id.rmse},
            {"process_noise", id.process_noise}};
   if (id.reference_delay) j["reference_delay"] = *id.reference_delay;
+  if (id.transfer_offset_std) j["transfer_offset_std"] = *id.transfer_offset_std;
 }
 
 void from_json(const json& j, Identification& id) { id = read_identification(j, "identification"); }
@@ -385,7 +394,8 @@ void from_json(const json& j, ModelParams& p) {
     if (paper.contains("y")) p.paper_y = read_paper_axis(paper.at("y"), "paper.y");
   }
   if (j.contains("full")) p.full = read_full(j.at("full"), "full");
-  if (j.contains("conditions")) read_conditions(j.at("conditions"), "conditions", p.full, p.conditions_flight, p.transferred);
+  if (j.contains("conditions"))
+    read_conditions(j.at("conditions"), "conditions", p.full, p.conditions_flight, p.transferred);
   if (j.contains("effects")) p.effects = read_effects(j.at("effects"), "effects");
   if (j.contains("identification")) p.identification = read_identification(j.at("identification"), "identification");
 }

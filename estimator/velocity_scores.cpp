@@ -1,5 +1,6 @@
 #include "estimator/velocity_scores.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -157,6 +158,47 @@ LeastSquaresDragScores score_least_squares_drag(const ImuSeries& series, const L
   if (out.blocks == 0) throw std::invalid_argument("the least-squares anchor: no 0.1-s block inside the window");
   out.raw = raw.rmse();
   out.smoothed = smoothed.rmse();
+  return out;
+}
+
+TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::span<const TimeWindow> windows,
+                                       const ModelParams& params) {
+  if (flights.empty() || flights.size() != windows.size())
+    throw std::invalid_argument("measuring the transferred offset needs flights, each with its window");
+  TransferOffset out;
+  // Each flight as a new one: its own identity differs from the calibration's, so its conditions stay behind.
+  std::vector<ModelParams> flown;
+  for (const ImuSeries& f : flights) flown.push_back(for_flight(params, flight_identity(f) + "/transfer"));
+  const auto nees = [&](double offset_std) {
+    double sum = 0.0;
+    std::size_t samples = 0;
+    for (std::size_t i = 0; i < flights.size(); ++i) {
+      DragVelocityConfig config = config_for(flown[i]);
+      config.accel_offset_std = offset_std;
+      const VelocityEvaluation e = evaluate_velocity(flights[i], flown[i].full, windows[i], config);
+      sum += e.nees * static_cast<double>(e.samples);
+      samples += e.samples;
+    }
+    out.samples = samples;
+    return sum / static_cast<double>(std::max<std::size_t>(samples, 1));
+  };
+  constexpr double kHonest = 2.0;  // two axes
+  out.flights = flights.size();
+  out.nees_default = nees(kTransferredOffsetStd);
+  if (nees(0.0) <= kHonest) return out.nees = nees(0.0), out;
+  if (nees(kMaxTransferOffsetStd) > kHonest) {
+    out.offset_std = kMaxTransferOffsetStd, out.at_limit = true;
+    out.nees = nees(kMaxTransferOffsetStd);
+    return out;
+  }
+  // NEES falls as the std grows: bisect in log space, 1e-3 .. kMaxTransferOffsetStd m/s^2, to 1 %.
+  double low = std::log(1e-3), high = std::log(kMaxTransferOffsetStd);
+  while (high - low > 0.01) {
+    const double mid = 0.5 * (low + high);
+    (nees(std::exp(mid)) > kHonest ? low : high) = mid;
+  }
+  out.offset_std = std::exp(high);
+  out.nees = nees(out.offset_std);
   return out;
 }
 

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "estimator/identify.hpp"
@@ -61,5 +62,21 @@ struct LeastSquaresDragScores {
 // Throws std::invalid_argument without a reference, or for a window with no whole block.
 LeastSquaresDragScores score_least_squares_drag(const ImuSeries& series, const LeastSquaresDrag& fit,
                                                 const TimeWindow& window);
+
+// What a calibration does not know of a flight it was not fitted on (docs/estimator.md, "Honest variance"): the
+// accelerometer offset std that makes the filter's normalised error squared 2 (its two axes: an honest variance) over
+// flights with a reference that the calibration was not fitted on, each flown as a new flight (for_flight, its
+// conditions left behind) and scored on its window. Bisection on the std between 0 and kMaxTransferOffsetStd.
+inline constexpr double kMaxTransferOffsetStd = 5.0;  // m/s^2, half a g: beyond it no offset explains the error
+struct TransferOffset {
+  double offset_std = 0.0;    // m/s^2
+  double nees_default = 0.0;  // the flights' NEES with kTransferredOffsetStd
+  double nees = 0.0;          // with offset_std
+  bool at_limit = false;      // NEES stays above 2 at kMaxTransferOffsetStd: the error is not an offset alone
+  std::size_t flights = 0, samples = 0;
+};
+// Throws std::invalid_argument for no flights, a flight without a reference, or params without drag on both axes.
+TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::span<const TimeWindow> windows,
+                                       const ModelParams& params);
 
 }  // namespace imubridge::estimator

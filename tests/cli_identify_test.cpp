@@ -214,6 +214,9 @@ TEST_F(IdentifyCommand, FitsOneCalibrationOverSeveralFlightsAndValidatesItOnOthe
   EXPECT_EQ(std::count(flight.begin(), flight.end(), ','), 2) << flight;
   EXPECT_NE(r.err.find("session 3 fits"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("session 4 validates"), std::string::npos) << r.err;
+  // The offset a new flight carries, measured on the validating flight (it has a reference) for the live filter.
+  EXPECT_NE(r.err.find("measured on the 1 validating flights"), std::string::npos) << r.err;
+  EXPECT_GE(id["transfer_offset_std"].get<double>(), 0.0);
 
   const std::string args = " --velocity reference --out " + out("set-bad.json");
   expect_error(identify("--session 1,3" + args), 2, "--validate-session");

@@ -291,6 +291,7 @@ int run(const DiagnoseCliOptions& o) {
   if (several) {
     // Conditions fitted over several flights are no one flight's: named by the set, they fly on none.
     diagnosis.final_params.conditions_flight = flights->identity;
+    measure_transfer(*flights, diagnosis.final_params, stdout);
   } else {
     diagnosis.imu_axes = session->axes.description;
     diagnosis.warnings.insert(diagnosis.warnings.begin(), session->warnings.begin(), session->warnings.end());

@@ -3,9 +3,11 @@
 // cut to its own window (--train of a fitting flight, --validate of a validating one, each of its own flight), and
 // joined into one series with long gaps between them (estimator/flight_set.hpp). One definition for both commands.
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -13,6 +15,7 @@
 #include "daemon/commands/session_windows.hpp"
 #include "estimator/flight_set.hpp"
 #include "estimator/identify.hpp"
+#include "estimator/velocity_scores.hpp"
 #include "pipeline/session_series.hpp"
 #include "store/store.hpp"
 
@@ -22,6 +25,7 @@ struct FlightSetReading {
   std::vector<std::int64_t> ids;  // the fitting flights, then the validating ones
   std::size_t fitting = 0;
   std::vector<estimator::ImuSeries> flights;   // each cut to its window
+  std::vector<estimator::ImuSeries> whole;     // each as read: a filter scoring a window runs from the flight start
   std::vector<estimator::TimeWindow> windows;  // each flight's window, in its own time
   std::string identity;                        // "flights:imu:…,imu:…": what conditions fitted over the set name
   bool every_reference = true;
@@ -58,6 +62,7 @@ inline FlightSetReading read_flight_set(const store::Store& store, const std::ve
     out.identity += (i == 0 ? "" : ",") + estimator::flight_identity(session.series);
     out.every_reference = out.every_reference && session.series.reference.has_value();
     out.flights.push_back(estimator::cut(session.series, window));
+    out.whole.push_back(session.series);
     out.windows.push_back(window);
   }
   return out;
@@ -106,6 +111,34 @@ inline void print_flight_map(std::FILE* to, const FlightSetReading& r, const Joi
     std::fprintf(to, "  session %lld %s: %.3f:%.3f s of its own, %.3f:%.3f s here\n", static_cast<long long>(r.ids[i]),
                  i < r.fitting ? "fits" : "validates", r.windows[i].start, r.windows[i].start + (here.end - here.start),
                  here.start, here.end);
+  }
+}
+
+// The accelerometer offset a new flight carries, measured on the validating flights when each has a reference
+// (estimator::measure_transfer_offset) and kept in `params` for the live filter; said on `to` either way.
+inline void measure_transfer(const FlightSetReading& r, estimator::ModelParams& params, std::FILE* to) {
+  const std::span<const estimator::ImuSeries> validating(r.whole.begin() + static_cast<std::ptrdiff_t>(r.fitting),
+                                                         r.whole.end());
+  const std::span<const estimator::TimeWindow> windows(r.windows.begin() + static_cast<std::ptrdiff_t>(r.fitting),
+                                                       r.windows.end());
+  if (!std::all_of(validating.begin(), validating.end(), [](const auto& f) { return f.reference.has_value(); })) {
+    std::fprintf(to,
+                 "the offset a new flight carries is not measured (a validating flight has no reference): the "
+                 "filter counts the default %g m/s^2\n",
+                 estimator::kTransferredOffsetStd);
+    return;
+  }
+  try {
+    const estimator::TransferOffset t = estimator::measure_transfer_offset(validating, windows, params);
+    params.identification.transfer_offset_std = t.offset_std;
+    std::fprintf(to,
+                 "the offset a new flight carries, measured on the %zu validating flights: %.3g m/s^2 (their NEES "
+                 "%.2f with the default %g m/s^2, %.2f with it; 2 is honest)%s\n",
+                 t.flights, t.offset_std, t.nees_default, estimator::kTransferredOffsetStd, t.nees,
+                 t.at_limit ? "; at its limit: the error on these flights is not an offset alone" : "");
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(to, "the offset a new flight carries is not measured (%s): the filter counts the default %g m/s^2\n",
+                 e.what(), estimator::kTransferredOffsetStd);
   }
 }
 

@@ -245,7 +245,10 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
                                    : est::identify(joined.set.series, options);
   result.params.conditions_flight = flights.identity;
   const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
-  if (implausible.empty()) save(o, result);
+  if (implausible.empty()) {
+    measure_transfer(flights, result.params, stderr);
+    save(o, result);
+  }
 
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   print_summary(o, result, options.velocity, describe_sessions(flights), wall);
