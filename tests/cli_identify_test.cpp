@@ -183,8 +183,15 @@ TEST_F(IdentifyCommand, EvaluateCarriesTheLeastSquaresAnchorFromItsOwnSession) {
   const CommandResult carried = run_imubridge(evaluate + "--session 3 --baseline-train 0:60 --baseline-session 1");
   ASSERT_EQ(carried.exit_code, 0) << carried.err;
   const json o = json::parse(own.out), c = json::parse(carried.out);
-  EXPECT_EQ(o["least_squares"]["train_session"], 3);
-  EXPECT_EQ(c["least_squares"]["train_session"], 1);
+  EXPECT_EQ(o["least_squares"]["train_sessions"], json::array({3}));
+  EXPECT_EQ(c["least_squares"]["train_sessions"], json::array({1}));
+  // Fitted over two flights together: one line, neither flight's own.
+  const CommandResult pooled = run_imubridge(evaluate + "--session 3 --baseline-train 0:60 --baseline-session 1,4");
+  ASSERT_EQ(pooled.exit_code, 0) << pooled.err;
+  const json p = json::parse(pooled.out);
+  EXPECT_EQ(p["least_squares"]["train_sessions"], json::array({1, 4}));
+  EXPECT_EQ(p["least_squares"]["train_windows"].size(), 2u);
+  EXPECT_NE(p["least_squares"]["k"], c["least_squares"]["k"]);
   EXPECT_NE(o["least_squares"]["k"], c["least_squares"]["k"]);
   for (const json* e : {&o, &c}) {
     const json& rmse = (*e)["rmse_m_s"];

@@ -18,6 +18,7 @@
 #include "daemon/commands/reference_delay_option.hpp"
 #include "daemon/commands/session_list.hpp"
 #include "daemon/commands/session_windows.hpp"
+#include "estimator/flight_set.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/params.hpp"
 #include "estimator/velocity_scores.hpp"
@@ -37,7 +38,7 @@ struct EvaluateCliOptions {
   std::optional<double> reference_delay;
   bool in_flight = false;
   std::optional<std::string> window, baseline_train;
-  std::optional<std::int64_t> baseline_session;
+  std::optional<std::string> baseline_sessions;
 };
 
 json to_json(const est::VelocityError& e) {
@@ -57,13 +58,32 @@ pipeline::SessionSeries read_session(const store::Store& store, std::int64_t id,
 // The least-squares anchor and where it was fitted (docs/results.md, "fair anchors").
 struct Anchor {
   est::LeastSquaresDrag fit;
-  std::int64_t session = 0;
-  est::TimeWindow train;
+  std::vector<std::int64_t> sessions;
+  std::vector<est::TimeWindow> train;  // each session's, in its own time
 };
-Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
+est::TimeWindow anchor_window(const pipeline::SessionSeries& session, const EvaluateCliOptions& o) {
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
-  const est::TimeWindow train = o.baseline_train ? est::parse_window(*o.baseline_train, span) : span;
-  return {est::fit_least_squares_drag(session.series, train), id, train};
+  return o.baseline_train ? est::parse_window(*o.baseline_train, span) : span;
+}
+Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
+  const est::TimeWindow train = anchor_window(session, o);
+  return {est::fit_least_squares_drag(session.series, train), {id}, {train}};
+}
+// Several sessions: one line fitted over their windows together, as a calibration over several flights is
+// (estimator/flight_set.hpp joins them; the blocks never span two flights).
+Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& ids, const EvaluateCliOptions& o) {
+  if (ids.size() == 1) return fit_anchor(read_session(store, ids.front(), o), ids.front(), o);
+  Anchor out;
+  std::vector<est::ImuSeries> flights;
+  for (const std::int64_t id : ids) {
+    const pipeline::SessionSeries session = read_session(store, id, o);
+    out.train.push_back(est::clip(anchor_window(session, o), session.series.t, "anchor's training"));
+    flights.push_back(est::cut(session.series, out.train.back()));
+  }
+  const est::FlightSet set = est::join_flights(flights);
+  out.fit = est::fit_least_squares_drag(set.series, est::data_span(set.series.t));
+  out.sessions = ids;
+  return out;
 }
 
 // One session's scores, as JSON.
@@ -104,14 +124,16 @@ json evaluate_session(const store::Store& store, std::int64_t id, const est::Mod
                 {"non_finite", session.counts.non_finite},
                 {"time_not_increasing", session.counts.time_not_increasing},
                 {"outside_reference", session.counts.outside_reference}}}};
-  if (o.baseline_train || o.baseline_session) {
+  if (o.baseline_train || o.baseline_sessions) {
     // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window.
     const Anchor anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
     const est::LeastSquaresDragScores a = est::score_least_squares_drag(session.series, anchor.fit, e.window);
     out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
     out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
-    out["least_squares"] = {{"train_session", anchor.session},
-                            {"train_window", {anchor.train.start, anchor.train.end}},
+    json train = json::array();
+    for (const est::TimeWindow& w : anchor.train) train.push_back({w.start, w.end});
+    out["least_squares"] = {{"train_sessions", anchor.sessions},
+                            {"train_windows", train},
                             {"k", {anchor.fit.k.x(), anchor.fit.k.y()}},
                             {"b", {anchor.fit.b.x(), anchor.fit.b.y()}},
                             {"blocks_scored", a.blocks}};
@@ -175,7 +197,7 @@ int run(const EvaluateCliOptions& o) {
   const store::Store store(o.db, {.read_only = true});
   const est::ModelParams file = est::load_params(o.params);
   std::optional<Anchor> anchor;
-  if (o.baseline_session) anchor = fit_anchor(read_session(store, *o.baseline_session, o), *o.baseline_session, o);
+  if (o.baseline_sessions) anchor = fit_anchor(store, parse_session_list(*o.baseline_sessions), o);
   if (ids.size() == 1) {
     std::printf("%s\n", evaluate_session(store, ids.front(), file, anchor, o).dump(2).c_str());
     return 0;
@@ -215,9 +237,10 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
                   "Also score the least-squares anchor: a = -k v + b per axis on 0.1-s means (PX4's drag tuning), "
                   "fitted on this window against the reference, inverted raw and 1-s smoothed "
                   "(\"least_squares_means\", \"least_squares_smoothed\")");
-  cmd->add_option("--baseline-session", o->baseline_session,
-                  "Fit the anchor on this session (default: each scored session itself), on --baseline-train or its "
-                  "whole span: a calibration carried to other flights, like the model's");
+  cmd->add_option("--baseline-session", o->baseline_sessions,
+                  "Fit the anchor on this session, or on several together (1,16,30), each on --baseline-train or its "
+                  "whole span (default: each scored session itself): a calibration carried to other flights, like "
+                  "the model's");
   add_in_flight_flag(*cmd, o->in_flight);
   add_reference_delay_option(*cmd, o->reference_delay);
   cmd->add_option("--window", o->window,
