@@ -152,15 +152,26 @@ TEST_F(IdentifyCommand, EvaluateScoresOneCalibrationOverSeveralFlights) {
   EXPECT_EQ(e["flights"][1]["session"], 3);
   const json& summary = e["summary"];
   EXPECT_EQ(summary["flights_scored"], 2);
-  EXPECT_EQ(summary["flights_worse_than_zero"], 0);
+  EXPECT_EQ(summary["estimator"]["flights_worse_than_zero"], 0);
   // The median of two is their mean.
   const auto horizontal = [&e](int f, const char* source) {
     return e["flights"][f]["rmse_m_s"][source]["horizontal"].get<double>();
   };
-  EXPECT_NEAR(summary["median_rmse_m_s"]["estimator"].get<double>(),
+  EXPECT_NEAR(summary["estimator"]["median_rmse_m_s"].get<double>(),
               0.5 * (horizontal(0, "estimator") + horizontal(1, "estimator")), 1e-9);
-  EXPECT_LT(summary["median_ratio_to_zero"].get<double>(), 1.0);
-  EXPECT_NE(r.err.find("2 flights: median"), std::string::npos) << r.err;
+  EXPECT_LT(summary["estimator"]["median_ratio_to_zero"].get<double>(), 1.0);
+  EXPECT_NE(r.err.find("estimator: median"), std::string::npos) << r.err;
+
+  // The anchor alone, without a PARAMS.json: zero velocity beside it.
+  const CommandResult anchor = run_imubridge(
+      "evaluate --db " + db_ + " --window 10:60 --session 1,3 --baseline-session 4 --baseline-train 0:60");
+  ASSERT_EQ(anchor.exit_code, 0) << anchor.err;
+  const json a = json::parse(anchor.out);
+  EXPECT_FALSE(a["summary"].contains("estimator"));
+  // On this flight the lever arm's terms swamp a two-parameter line: the anchor is far worse than zero velocity.
+  EXPECT_EQ(a["summary"]["least_squares_smoothed"]["flights_worse_than_zero"], 2);
+  EXPECT_NEAR(a["flights"][1]["rmse_m_s"]["zero"]["horizontal"].get<double>(), horizontal(1, "zero"), 0.05);
+  expect_error(run_imubridge("evaluate --db " + db_ + " --session 1"), 2, "nothing to score");
 
   // A flight that cannot be scored is named in its row and in the exit status; the others are still scored.
   const CommandResult partly = run_imubridge(evaluate + "--session 1-3");

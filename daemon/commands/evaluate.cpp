@@ -32,7 +32,8 @@ namespace est = imubridge::estimator;
 using nlohmann::json;
 
 struct EvaluateCliOptions {
-  std::string db, params, sessions;
+  std::string db, sessions;
+  std::optional<std::string> params;
   std::optional<std::int64_t> link;
   std::optional<std::string> imu_axes;
   std::optional<double> reference_delay;
@@ -86,48 +87,53 @@ Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& id
   return out;
 }
 
-// One session's scores, as JSON.
-json evaluate_session(const store::Store& store, std::int64_t id, const est::ModelParams& file,
+// One session's scores, as JSON: the estimator's with PARAMS.json (`file`), the anchor's when asked, zero velocity's.
+json evaluate_session(const store::Store& store, std::int64_t id, const std::optional<est::ModelParams>& file,
                       const std::optional<Anchor>& fixed_anchor, const EvaluateCliOptions& o) {
   const pipeline::SessionSeries session = read_session(store, id, o);
-  std::string left;
-  const est::ModelParams params = est::for_flight(file, est::flight_identity(session.series), &left);
-  if (!left.empty()) std::fprintf(stderr, "session %lld: %s\n", static_cast<long long>(id), left.c_str());
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;
-  const est::VelocityEvaluation e =
-      est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
-  const est::DragVelocityCounters& c = e.counters;
-  json out = {{"session", id},
-              {"link", session.link_id},
-              {"window", {e.window.start, e.window.end}},
-              {"samples", e.samples},
-              {"reference_delay_s", session.reference_shift_s},
-              {"rmse_m_s",
-               {{"estimator", to_json(e.estimator)},
-                {"raw_inversion", to_json(e.inversion)},
-                {"eq12", to_json(e.eq12)},
-                {"zero", to_json(e.zero)}}},
-              // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
-              {"estimator_nees", e.nees},
-              {"estimator_counters",
-               {{"samples_in", c.samples_in},
-                {"estimates_out", c.estimates_out},
-                {"rejected_non_finite", c.rejected_non_finite},
-                {"rejected_out_of_range", c.rejected_out_of_range},
-                {"rejected_time", c.rejected_time},
-                {"gaps", c.gaps},
-                {"clock_restarts", c.clock_restarts}}},
-              {"series_counts",
-               {{"samples", session.counts.samples},
-                {"non_finite", session.counts.non_finite},
-                {"time_not_increasing", session.counts.time_not_increasing},
-                {"outside_reference", session.counts.outside_reference}}}};
+  json out = {{"session", id}, {"link", session.link_id}, {"reference_delay_s", session.reference_shift_s}};
+  est::TimeWindow scored;
+  if (file) {
+    std::string left;
+    const est::ModelParams params = est::for_flight(*file, est::flight_identity(session.series), &left);
+    if (!left.empty()) std::fprintf(stderr, "session %lld: %s\n", static_cast<long long>(id), left.c_str());
+    const est::VelocityEvaluation e =
+        est::evaluate_velocity(session.series, params.full, window, est::config_for(params));
+    const est::DragVelocityCounters& c = e.counters;
+    scored = e.window;
+    out["samples"] = e.samples;
+    out["rmse_m_s"] = {{"estimator", to_json(e.estimator)},
+                       {"raw_inversion", to_json(e.inversion)},
+                       {"eq12", to_json(e.eq12)},
+                       {"zero", to_json(e.zero)}};
+    // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
+    out["estimator_nees"] = e.nees;
+    out["estimator_counters"] = {{"samples_in", c.samples_in},
+                                 {"estimates_out", c.estimates_out},
+                                 {"rejected_non_finite", c.rejected_non_finite},
+                                 {"rejected_out_of_range", c.rejected_out_of_range},
+                                 {"rejected_time", c.rejected_time},
+                                 {"gaps", c.gaps},
+                                 {"clock_restarts", c.clock_restarts}};
+  } else {
+    // The anchor alone: zero velocity beside it, in the series' axes as the anchor is.
+    scored = est::clip(window.value_or(span), session.series.t, "evaluation");
+    const est::VelocityScores zero =
+        est::zero_velocity_scores(session.series, Eigen::Vector3d::Zero(), {scored, scored});
+    out["rmse_m_s"] = {{"zero", to_json(zero.validation)}};
+  }
+  out["window"] = {scored.start, scored.end};
+  out["series_counts"] = {{"samples", session.counts.samples},
+                          {"non_finite", session.counts.non_finite},
+                          {"time_not_increasing", session.counts.time_not_increasing},
+                          {"outside_reference", session.counts.outside_reference}};
   if (o.baseline_train || o.baseline_sessions) {
     // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window.
     const Anchor anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
-    const est::LeastSquaresDragScores a = est::score_least_squares_drag(session.series, anchor.fit, e.window);
+    const est::LeastSquaresDragScores a = est::score_least_squares_drag(session.series, anchor.fit, scored);
     out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
     out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
     json train = json::array();
@@ -149,44 +155,59 @@ double median(std::vector<double> x) {
   return n % 2 == 1 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
-// Several flights: the per-flight table on stderr, and the medians and counts a user judges a calibration by.
+// Several flights: the per-flight table on stderr, and for each velocity scored (the estimator's, the anchor's) the
+// medians and the count of flights worse than zero velocity, which is how a user judges a calibration.
 json summarise(const json& flights, std::size_t failed) {
-  std::vector<double> estimator, zero, ratio, nees, anchor_ratio;
-  std::size_t worse = 0, anchor_worse = 0;
-  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s\n", "session", "estimator", "zero", "ratio", "nees", "ls_smoothed");
+  struct Column {
+    const char* source;
+    bool estimator;  // the filter's: it has a NEES
+    std::vector<double> rmse, ratio;
+    std::size_t worse = 0;
+  };
+  std::vector<Column> columns{{"estimator", true, {}, {}}, {"least_squares_smoothed", false, {}, {}}};
+  std::vector<double> zero, nees;
+  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s\n", "session", "zero", "estimator", "ratio", "nees", "ls_smoothed");
   for (const json& f : flights) {
+    const long long session = f["session"].get<long long>();
     if (f.contains("error")) {
-      std::fprintf(stderr, "%8lld  not scored: %s\n", f["session"].get<long long>(),
-                   f["error"].get<std::string>().c_str());
+      std::fprintf(stderr, "%8lld  not scored: %s\n", session, f["error"].get<std::string>().c_str());
       continue;
     }
-    const double e = f["rmse_m_s"]["estimator"]["horizontal"], z = f["rmse_m_s"]["zero"]["horizontal"];
-    estimator.push_back(e), zero.push_back(z), ratio.push_back(e / z), nees.push_back(f["estimator_nees"]);
-    worse += e > z ? 1 : 0;
-    std::fprintf(stderr, "%8lld %9.3f %9.3f %7.2f %6.2f", f["session"].get<long long>(), e, z, e / z, nees.back());
-    if (f["rmse_m_s"].contains("least_squares_smoothed")) {
-      const double a = f["rmse_m_s"]["least_squares_smoothed"]["horizontal"];
-      anchor_ratio.push_back(a / z);
-      anchor_worse += a > z ? 1 : 0;
-      std::fprintf(stderr, " %12.3f", a);
+    const json& rmse = f["rmse_m_s"];
+    const double z = rmse["zero"]["horizontal"];
+    zero.push_back(z);
+    std::fprintf(stderr, "%8lld %9.3f", session, z);
+    for (Column& c : columns) {
+      if (!rmse.contains(c.source)) {
+        std::fprintf(stderr, c.estimator ? " %9s %7s %6s" : " %12s", "-", "-", "-");
+        continue;
+      }
+      const double e = rmse[c.source]["horizontal"];
+      c.rmse.push_back(e), c.ratio.push_back(e / z);
+      c.worse += e > z ? 1 : 0;
+      if (c.estimator) {
+        nees.push_back(f["estimator_nees"]);
+        std::fprintf(stderr, " %9.3f %7.2f %6.2f", e, e / z, nees.back());
+      } else {
+        std::fprintf(stderr, " %12.3f", e);
+      }
     }
     std::fprintf(stderr, "\n");
   }
-  json summary = {{"flights_scored", estimator.size()},
-                  {"flights_not_scored", failed},
-                  {"median_rmse_m_s", {{"estimator", median(estimator)}, {"zero", median(zero)}}},
-                  {"median_ratio_to_zero", median(ratio)},
-                  {"flights_worse_than_zero", worse},
-                  {"median_estimator_nees", median(nees)}};
-  std::fprintf(stderr,
-               "%zu flights: median %.3f m/s against zero velocity's %.3f (median ratio %.2f), %zu worse than zero, "
-               "median NEES %.2f\n",
-               estimator.size(), median(estimator), median(zero), median(ratio), worse, median(nees));
-  if (!anchor_ratio.empty()) {
-    summary["least_squares_smoothed"] = {{"median_ratio_to_zero", median(anchor_ratio)},
-                                         {"flights_worse_than_zero", anchor_worse}};
-    std::fprintf(stderr, "least-squares anchor (1-s smoothed): median ratio %.2f, %zu worse than zero\n",
-                 median(anchor_ratio), anchor_worse);
+  json summary = {{"flights_scored", zero.size()}, {"flights_not_scored", failed}, {"median_zero_m_s", median(zero)}};
+  std::fprintf(stderr, "%zu flights, zero velocity's median %.3f m/s\n", zero.size(), median(zero));
+  for (const Column& c : columns) {
+    if (c.rmse.empty()) continue;
+    summary[c.source] = {{"median_rmse_m_s", median(c.rmse)},
+                         {"median_ratio_to_zero", median(c.ratio)},
+                         {"flights_worse_than_zero", c.worse}};
+    std::fprintf(stderr, "%s: median %.3f m/s (median ratio to zero %.2f), %zu of %zu flights worse than zero",
+                 c.source, median(c.rmse), median(c.ratio), c.worse, c.rmse.size());
+    if (c.estimator) {
+      summary[c.source]["median_nees"] = median(nees);
+      std::fprintf(stderr, ", median NEES %.2f", median(nees));
+    }
+    std::fprintf(stderr, "\n");
   }
   if (failed > 0) std::fprintf(stderr, "%zu flight(s) could not be scored (above)\n", failed);
   return summary;
@@ -194,8 +215,13 @@ json summarise(const json& flights, std::size_t failed) {
 
 int run(const EvaluateCliOptions& o) {
   const std::vector<std::int64_t> ids = parse_session_list(o.sessions);
+  if (!o.params && !o.baseline_train && !o.baseline_sessions)
+    throw std::invalid_argument(
+        "nothing to score: give --params, or --baseline-train / --baseline-session for the "
+        "least-squares anchor alone");
   const store::Store store(o.db, {.read_only = true});
-  const est::ModelParams file = est::load_params(o.params);
+  std::optional<est::ModelParams> file;
+  if (o.params) file = est::load_params(*o.params);
   std::optional<Anchor> anchor;
   if (o.baseline_sessions) anchor = fit_anchor(store, parse_session_list(*o.baseline_sessions), o);
   if (ids.size() == 1) {
@@ -215,7 +241,10 @@ int run(const EvaluateCliOptions& o) {
     }
   }
   const json summary = summarise(flights, failed);
-  std::printf("%s\n", json{{"params", o.params}, {"flights", flights}, {"summary", summary}}.dump(2).c_str());
+  std::printf("%s\n",
+              json{{"params", o.params ? json(*o.params) : json(nullptr)}, {"flights", flights}, {"summary", summary}}
+                  .dump(2)
+                  .c_str());
   return failed == 0 ? 0 : 1;
 }
 
@@ -232,7 +261,8 @@ const RegisterCommand kEvaluate([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "
                   "recorded, else auto; docs/estimator.md, IMU axes)");
-  cmd->add_option("--params", o->params, "PARAMS.json, e.g. from `imubridge identify`")->required();
+  cmd->add_option("--params", o->params,
+                  "PARAMS.json, e.g. from `imubridge identify` (without it, the least-squares anchor alone is scored)");
   cmd->add_option("--baseline-train", o->baseline_train,
                   "Also score the least-squares anchor: a = -k v + b per axis on 0.1-s means (PX4's drag tuning), "
                   "fitted on this window against the reference, inverted raw and 1-s smoothed "
