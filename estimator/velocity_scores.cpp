@@ -121,6 +121,7 @@ LeastSquaresDrag fit_least_squares_drag(const ImuSeries& series, const TimeWindo
       const double v = blocks.velocity[i][axis], a = blocks.accel[i][axis];
       n += 1.0, sv += v, sa += a, svv += v * v, sva += v * a;
     }
+    if (n == 0.0) throw std::invalid_argument("the least-squares anchor: no 0.1-s block inside the training window");
     const double det = n * svv - sv * sv;
     if (!(det > 0.0) || n < 2.0)
       throw std::invalid_argument("the least-squares anchor: the training velocity does not vary");

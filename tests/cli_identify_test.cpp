@@ -196,6 +196,15 @@ TEST_F(IdentifyCommand, EvaluateCarriesTheLeastSquaresAnchorFromItsOwnSession) {
   const json o = json::parse(own.out), c = json::parse(carried.out);
   EXPECT_EQ(o["least_squares"]["train_sessions"], json::array({3}));
   EXPECT_EQ(c["least_squares"]["train_sessions"], json::array({1}));
+  // An anchor that cannot be fitted is said, once and in each flight's report; the model is still scored.
+  const CommandResult unfit = run_imubridge(evaluate + "--session 3,4 --baseline-train 500:600 --baseline-session 1");
+  ASSERT_EQ(unfit.exit_code, 0) << unfit.err;
+  EXPECT_NE(unfit.err.find("warning: the least-squares anchor: no 0.1-s block inside the training window"),
+            std::string::npos)
+      << unfit.err;
+  const json u = json::parse(unfit.out);
+  EXPECT_TRUE(u["flights"][0].contains("least_squares_error"));
+  EXPECT_EQ(u["summary"]["estimator"]["flights_worse_than_zero"], 0);
   // Fitted over two flights together: one line, neither flight's own.
   const CommandResult pooled = run_imubridge(evaluate + "--session 3 --baseline-train 0:60 --baseline-session 1,4");
   ASSERT_EQ(pooled.exit_code, 0) << pooled.err;

@@ -57,6 +57,19 @@ pipeline::SessionSeries read_session(const store::Store& store, std::int64_t id,
 }
 
 // The least-squares anchor and where it was fitted (docs/results.md, "fair anchors").
+// A line that cannot be fitted or inverted (no drag in the data) is said in its place, not fatal: zero velocity and
+// the model are still scored.
+struct AnchorUnfit : std::invalid_argument {
+  using std::invalid_argument::invalid_argument;
+};
+template <typename F>
+auto anchor_step(F&& step) {
+  try {
+    return step();
+  } catch (const std::invalid_argument& e) {
+    throw AnchorUnfit(e.what());
+  }
+}
 struct Anchor {
   est::LeastSquaresDrag fit;
   std::vector<std::int64_t> sessions;
@@ -68,7 +81,7 @@ est::TimeWindow anchor_window(const pipeline::SessionSeries& session, const Eval
 }
 Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
   const est::TimeWindow train = anchor_window(session, o);
-  return {est::fit_least_squares_drag(session.series, train), {id}, {train}};
+  return {anchor_step([&] { return est::fit_least_squares_drag(session.series, train); }), {id}, {train}};
 }
 // Several sessions: one line fitted over their windows together, as a calibration over several flights is
 // (estimator/flight_set.hpp joins them; the blocks never span two flights).
@@ -82,14 +95,16 @@ Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& id
     flights.push_back(est::cut(session.series, out.train.back()));
   }
   const est::FlightSet set = est::join_flights(flights);
-  out.fit = est::fit_least_squares_drag(set.series, est::data_span(set.series.t));
+  out.fit = anchor_step([&] { return est::fit_least_squares_drag(set.series, est::data_span(set.series.t)); });
   out.sessions = ids;
   return out;
 }
 
 // One session's scores, as JSON: the estimator's with PARAMS.json (`file`), the anchor's when asked, zero velocity's.
+// `anchor_error`: why --baseline-session's anchor could not be fitted ("" when it was, or none was asked).
 json evaluate_session(const store::Store& store, std::int64_t id, const std::optional<est::ModelParams>& file,
-                      const std::optional<Anchor>& fixed_anchor, const EvaluateCliOptions& o) {
+                      const std::optional<Anchor>& fixed_anchor, const std::string& anchor_error,
+                      const EvaluateCliOptions& o) {
   const pipeline::SessionSeries session = read_session(store, id, o);
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
@@ -130,10 +145,21 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
                           {"non_finite", session.counts.non_finite},
                           {"time_not_increasing", session.counts.time_not_increasing},
                           {"outside_reference", session.counts.outside_reference}};
-  if (o.baseline_train || o.baseline_sessions) {
-    // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window.
-    const Anchor anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
-    const est::LeastSquaresDragScores a = est::score_least_squares_drag(session.series, anchor.fit, scored);
+  if ((o.baseline_train || o.baseline_sessions) && !anchor_error.empty()) {
+    out["least_squares_error"] = anchor_error;
+  } else if (o.baseline_train || o.baseline_sessions) {
+    // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window. A line
+    // that cannot be fitted or inverted here (no drag in it) is said in its place; the rest is still scored.
+    Anchor anchor;
+    est::LeastSquaresDragScores a;
+    try {
+      anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
+      a = anchor_step([&] { return est::score_least_squares_drag(session.series, anchor.fit, scored); });
+    } catch (const AnchorUnfit& e) {
+      out["least_squares_error"] = e.what();
+      print_reference_delay(session);
+      return out;
+    }
     out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
     out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
     json train = json::array();
@@ -223,9 +249,19 @@ int run(const EvaluateCliOptions& o) {
   std::optional<est::ModelParams> file;
   if (o.params) file = est::load_params(*o.params);
   std::optional<Anchor> anchor;
-  if (o.baseline_sessions) anchor = fit_anchor(store, parse_session_list(*o.baseline_sessions), o);
+  std::string anchor_error;
+  if (o.baseline_sessions) {
+    const std::vector<std::int64_t> anchor_ids = parse_session_list(*o.baseline_sessions);
+    try {
+      anchor = fit_anchor(store, anchor_ids, o);
+    } catch (const AnchorUnfit& e) {
+      // Said once, and in each flight's report; zero velocity and the model are still scored.
+      anchor_error = e.what();
+      std::fprintf(stderr, "warning: %s\n", anchor_error.c_str());
+    }
+  }
   if (ids.size() == 1) {
-    std::printf("%s\n", evaluate_session(store, ids.front(), file, anchor, o).dump(2).c_str());
+    std::printf("%s\n", evaluate_session(store, ids.front(), file, anchor, anchor_error, o).dump(2).c_str());
     return 0;
   }
   // Several flights: one that cannot be scored (no reference, a window outside it) is reported in its row and in
@@ -234,7 +270,7 @@ int run(const EvaluateCliOptions& o) {
   std::size_t failed = 0;
   for (const std::int64_t id : ids) {
     try {
-      flights.push_back(evaluate_session(store, id, file, anchor, o));
+      flights.push_back(evaluate_session(store, id, file, anchor, anchor_error, o));
     } catch (const std::exception& e) {
       flights.push_back({{"session", id}, {"error", e.what()}});
       ++failed;
