@@ -48,10 +48,11 @@ struct DragVelocityConfig {
 // not make the filter overconfident. Parameters without an identification keep `base`. A process noise the
 // identification fitted (the filter error method) replaces base's.
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base = {});
-// A consumer MEMS accelerometer's zero-g offset (0.02-0.06 g): what a calibration carried to another flight does not
-// know of that flight's, m/s^2, unless the calibration measured it on its validating flights
-// (Identification::transfer_offset_std).
-inline constexpr double kTransferredOffsetStd = 0.3;
+// What a calibration carried to another flight does not know of that flight's accelerometer offset, m/s^2, unless it
+// measured it on its validating flights (Identification::transfer_offset_std): the upper end of a consumer MEMS
+// accelerometer's zero-g offset (0.02-0.06 g). The upper end, because a variance that claims more than is known
+// flies worse than "not moving", and a strapped-on IMU moved by a degree adds 0.17 m/s^2 of its own.
+inline constexpr double kTransferredOffsetStd = 0.06 * kGravity;
 
 struct DragVelocityEstimate {
   double t = 0.0;                                       // s: the sample this describes, delay_samples() back
