@@ -325,13 +325,7 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   auto* cmd = app.add_subcommand("diagnose",
                                  "Find what the accelerometer model misses: fit it, analyse the residual, add effects");
   cmd->add_option("--db", o->db, "Session store (SQLite), opened read-only")->required();
-  cmd->add_option("--session", o->sessions,
-                  "Session id; or several flights of one vehicle (1,2,3 or 1-3) diagnosed together, with "
-                  "--validate-session")
-      ->required();
-  cmd->add_option("--validate-session", o->validate_sessions,
-                  "Flights that validate each step, not fitted on (4,5 or 4-9): the windows then apply to each "
-                  "flight, --train to the fitting ones and --validate to these (default: each whole flight)");
+  add_flight_set_options(*cmd, o->sessions, o->validate_sessions, "diagnosed together");
   cmd->add_option("--link", o->link, "Link id (default: the session's link with the most samples)");
   cmd->add_option("--imu-axes", o->imu_axes,
                   "The IMU's axes: auto (from gravity), frd, flu, x-up, R:..., q:... (default: as the session "

@@ -2,6 +2,7 @@
 // Several flights for one fit (identify and diagnose, --session A,B,C --validate-session D,E): each session read,
 // cut to its own window (--train of a fitting flight, --validate of a validating one, each of its own flight), and
 // joined into one series with long gaps between them (estimator/flight_set.hpp). One definition for both commands.
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
@@ -20,6 +21,20 @@
 #include "store/store.hpp"
 
 namespace imubridge::cli {
+
+// --session and --validate-session, one definition for identify and diagnose. `fitted` says what is done with
+// several flights ("fitted together", "diagnosed together").
+inline void add_flight_set_options(CLI::App& cmd, std::string& sessions, std::optional<std::string>& validate,
+                                   const char* fitted) {
+  cmd.add_option("--session", sessions,
+                 std::string("Session id; or several flights of one vehicle (1,2,3 or 1-3) ") + fitted +
+                     ", with --validate-session")
+      ->required();
+  cmd.add_option("--validate-session", validate,
+                 "Flights that validate what was fitted on --session's, not fitted on (4,5 or 4-9): the windows then "
+                 "apply to each flight, --train to the fitting ones and --validate to these (default: each whole "
+                 "flight)");
+}
 
 struct FlightSetReading {
   std::vector<std::int64_t> ids;  // the fitting flights, then the validating ones
