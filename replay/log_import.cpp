@@ -37,7 +37,9 @@ Gaps find_gaps(std::span<const std::int64_t> t_ns, double threshold_s, std::int6
   check_gap_threshold(threshold_s);
   Gaps gaps{.threshold_s = threshold_s, .session_start_ns = session_start_ns};
   for (std::size_t i = 1; i < t_ns.size(); ++i) {
-    if (static_cast<double>(t_ns[i] - t_ns[i - 1]) * 1e-9 > threshold_s) gaps.holes.push_back({t_ns[i - 1], t_ns[i]});
+    // In doubles: a log's times can be anything, and their difference must not overflow (the fuzzer's 2^63-1 and -5).
+    if ((static_cast<double>(t_ns[i]) - static_cast<double>(t_ns[i - 1])) * 1e-9 > threshold_s)
+      gaps.holes.push_back({t_ns[i - 1], t_ns[i]});
   }
   return gaps;
 }
@@ -46,8 +48,8 @@ void append_gap_events(store::Store& store, std::int64_t session, std::int64_t l
   for (const Gap& g : gaps.holes) {
     char text[160];
     std::snprintf(text, sizeof text, "no IMU sample for %.3f s, from %.3f s to %.3f s of the session (over %g s)",
-                  g.seconds(), static_cast<double>(g.from_ns - gaps.session_start_ns) * 1e-9,
-                  static_cast<double>(g.to_ns - gaps.session_start_ns) * 1e-9, gaps.threshold_s);
+                  g.seconds(), (static_cast<double>(g.from_ns) - static_cast<double>(gaps.session_start_ns)) * 1e-9,
+                  (static_cast<double>(g.to_ns) - static_cast<double>(gaps.session_start_ns)) * 1e-9, gaps.threshold_s);
     store.append_event(session,
                        {.link_id = link, .mono_ns = g.from_ns, .wall_ns = g.from_ns, .kind = "gap", .detail = text});
   }

@@ -29,7 +29,8 @@ inline constexpr double kDefaultGapThresholdS = 0.5;
 
 struct Gap {
   std::int64_t from_ns = 0, to_ns = 0;  // the last sample before the hole and the first after it
-  double seconds() const { return static_cast<double>(to_ns - from_ns) * 1e-9; }
+  // In doubles: a log's times can be anything, and their difference must not overflow.
+  double seconds() const { return (static_cast<double>(to_ns) - static_cast<double>(from_ns)) * 1e-9; }
 };
 
 struct Gaps {
@@ -116,11 +117,11 @@ struct LogEvent {
 
 // What a flight log gives for its session, in the log's clock (µs since the autopilot booted).
 struct ImuLog {
-  std::string source{};      // the session's, for people: "PX4 ULog FILE"
-  std::string file{};        // as given, for the events' details
-  std::string imu_source{};  // which of the log's IMUs: "sensor_combined", "IMU2"
-  std::string device{};      // the link's, for people
-  nlohmann::json config{};   // the session's config snapshot
+  std::string source{};        // the session's, for people: "PX4 ULog FILE"
+  std::string file{};          // as given, for the events' details
+  std::string imu_source{};    // which of the log's IMUs: "sensor_combined", "IMU2"
+  std::string device{};        // the link's, for people
+  nlohmann::json config{};     // the session's config snapshot
   std::vector<ImuRow> rows{};  // increasing in time, at least one
   std::vector<store::ReferenceRow> reference{};
   std::vector<LogEvent> events{};  // in the order they are to be stored

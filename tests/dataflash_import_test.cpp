@@ -9,11 +9,13 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <variant>
 
 #include "replay/dataflash.hpp"
+#include "replay/log_import.hpp"
 #include "tests/stored_rows.hpp"
 #include "tests/temp_dir.hpp"
 
@@ -75,17 +77,34 @@ class Writer {
     if (const auto* text = std::get_if<std::string>(&value)) return fixed(*text, dataflash::field_size(type));
     const double v = std::get<double>(value);
     switch (type) {
-      case 'b': return raw(static_cast<std::int8_t>(v));
-      case 'B': case 'M': return raw(static_cast<std::uint8_t>(v));
-      case 'h': case 'c': return raw(static_cast<std::int16_t>(v));
-      case 'H': case 'C': return raw(static_cast<std::uint16_t>(v));
-      case 'i': case 'e': case 'L': return raw(static_cast<std::int32_t>(v));
-      case 'I': case 'E': return raw(static_cast<std::uint32_t>(v));
-      case 'f': return raw(static_cast<float>(v));
-      case 'd': return raw(v);
-      case 'q': return raw(static_cast<std::int64_t>(v));
-      case 'Q': return raw(static_cast<std::uint64_t>(v));
-      default: FAIL() << "no such field type " << type;
+      case 'b':
+        return raw(static_cast<std::int8_t>(v));
+      case 'B':
+      case 'M':
+        return raw(static_cast<std::uint8_t>(v));
+      case 'h':
+      case 'c':
+        return raw(static_cast<std::int16_t>(v));
+      case 'H':
+      case 'C':
+        return raw(static_cast<std::uint16_t>(v));
+      case 'i':
+      case 'e':
+      case 'L':
+        return raw(static_cast<std::int32_t>(v));
+      case 'I':
+      case 'E':
+        return raw(static_cast<std::uint32_t>(v));
+      case 'f':
+        return raw(static_cast<float>(v));
+      case 'd':
+        return raw(v);
+      case 'q':
+        return raw(static_cast<std::int64_t>(v));
+      case 'Q':
+        return raw(static_cast<std::uint64_t>(v));
+      default:
+        FAIL() << "no such field type " << type;
     }
   }
 };
@@ -96,7 +115,9 @@ class Writer {
 // TimeMS (GPS time of week, not boot time) must not time the records after it.
 constexpr std::uint32_t kOldT0Ms = 10'000;
 constexpr std::size_t kOldSamples = 100;
-std::uint32_t old_imu_ms(std::size_t i) { return i < 50 ? kOldT0Ms + 20 * static_cast<std::uint32_t>(i) : 12'000 + 20 * static_cast<std::uint32_t>(i - 50); }
+std::uint32_t old_imu_ms(std::size_t i) {
+  return i < 50 ? kOldT0Ms + 20 * static_cast<std::uint32_t>(i) : 12'000 + 20 * static_cast<std::uint32_t>(i - 50);
+}
 
 Writer old_log() {
   Writer w;
@@ -182,6 +203,20 @@ class DataflashImport : public ::testing::Test {
   }
 };
 
+// The holes every log importer records (replay/log_import.hpp): over the threshold only, between any two times a log
+// may hold (euroc_fuzz found 2^63-1 after -5 overflowing the difference).
+TEST(LogImportGaps, FindsTheHolesOverTheThresholdBetweenAnyTimes) {
+  const std::vector<std::int64_t> t{0, 100'000'000, 1'200'000'000, 1'300'000'000};
+  const Gaps gaps = find_gaps(t, 0.5, 0);
+  ASSERT_EQ(gaps.holes.size(), 1u);
+  EXPECT_EQ(gaps.holes[0].from_ns, 100'000'000);
+  EXPECT_NEAR(gaps.holes[0].seconds(), 1.1, 1e-12);
+  const std::vector<std::int64_t> extreme{-5, std::numeric_limits<std::int64_t>::max()};
+  const Gaps far = find_gaps(extreme, 0.5, 0);
+  ASSERT_EQ(far.holes.size(), 1u);
+  EXPECT_NEAR(far.holes[0].seconds(), 9.223372036854775812e9, 1e3);
+}
+
 TEST(DataflashReader, ReadsAnOlderLogTimedInMilliseconds) {
   const Writer w = old_log();
   const dataflash::Log log = dataflash::parse(w.bytes);
@@ -220,9 +255,9 @@ TEST(DataflashReader, ScalesByFmtuUnitAndMult) {
   const dataflash::Message* baro = log.message("BARO");
   ASSERT_NE(baro, nullptr);
   EXPECT_EQ(baro->fields[1].unit, "m");
-  EXPECT_DOUBLE_EQ(baro->value(0, 1), 1.234);  // h with MULT C: 1e-3
-  EXPECT_DOUBLE_EQ(baro->value(0, 2), 25.5);   // c with MULT B: the same 0.01, applied once
-  EXPECT_EQ(baro->value(0, 3), 1);             // '-': as stored
+  EXPECT_DOUBLE_EQ(baro->value(0, 1), 1.234);                           // h with MULT C: 1e-3
+  EXPECT_DOUBLE_EQ(baro->value(0, 2), 25.5);                            // c with MULT B: the same 0.01, applied once
+  EXPECT_EQ(baro->value(0, 3), 1);                                      // '-': as stored
   EXPECT_EQ(baro->integer(0, 0), static_cast<std::int64_t>(kNewT0Us));  // TimeUS: µs, whatever its multiplier
   EXPECT_EQ(baro->times[0], kNewT0Us);
   EXPECT_EQ(log.message("IMU")->size(), 200u);
@@ -242,7 +277,8 @@ TEST(DataflashReader, RefusesWhatIsNoDataflashLogInOneLine) {
   EXPECT_EQ(error(std::vector<std::uint8_t>(200, 'x')), not_df);
   Writer broken;
   broken.bytes[4] = 90;  // FMT's length, not the 89 bytes FMT takes
-  EXPECT_EQ(error(broken.bytes), "not a readable DataFlash log: its first record is a FMT for type 128 (FMT) redefining FMT otherwise");
+  EXPECT_EQ(error(broken.bytes),
+            "not a readable DataFlash log: its first record is a FMT for type 128 (FMT) redefining FMT otherwise");
   EXPECT_EQ(error(Writer().bytes), "");  // a log of one FMT is a log, of nothing
 }
 
@@ -273,7 +309,8 @@ TEST(DataflashReader, ReadsUpToTheDamage) {
   unknown[middle + 2] = 0x42;
   const dataflash::Log type = dataflash::parse(unknown);
   ASSERT_TRUE(type.damage);
-  EXPECT_EQ(*type.damage, "at byte " + std::to_string(middle) + ": a record of type 66, which no FMT before it defines");
+  EXPECT_EQ(*type.damage,
+            "at byte " + std::to_string(middle) + ": a record of type 66, which no FMT before it defines");
   EXPECT_EQ(imu_before(type), imu_before(header));
 
   Writer redefined = old_log();
@@ -469,7 +506,7 @@ TEST_F(DataflashImport, TheArduCopterFlightLog171) {
   EXPECT_GT(span_s, 230);
   EXPECT_LT(span_s, 250);
   EXPECT_NEAR(static_cast<double>(r.samples - 1) / span_s, 50, 1);  // the flight's IMU rate
-  EXPECT_FALSE(r.axes.mismatch);  // FRD: gravity on -z at rest
+  EXPECT_FALSE(r.axes.mismatch);                                    // FRD: gravity on -z at rest
   const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), 11916u);
   // The first sample at rest (AccZ -9.5875 m/s^2 in the file), and gravity's size on average over the flight (which
