@@ -49,24 +49,6 @@ void set_temperature(Sample& s, std::int16_t cdeg) {
   s.temperature_c = cdeg / 100.0;
 }
 
-// The sender's clock as a typed message carries it: time_usec, or time_boot_ms in microseconds; nothing for untimed
-// or undecoded messages.
-std::optional<std::uint64_t> device_time_us(const Message& m) {
-  const std::optional<Decoded> decoded = decode(m);
-  if (!decoded) return std::nullopt;
-  return std::visit(
-      []<typename M>(const M& message) -> std::optional<std::uint64_t> {
-        if constexpr (requires { message.time_usec; }) {
-          return static_cast<std::uint64_t>(message.time_usec);
-        } else if constexpr (requires { message.time_boot_ms; }) {
-          return std::uint64_t{message.time_boot_ms} * 1000;
-        } else {
-          return std::nullopt;
-        }
-      },
-      *decoded);
-}
-
 Sample sample_of(const HighresImu& m) {
   Sample s;
   s.device_time_us = static_cast<std::int64_t>(m.time_usec);
@@ -210,25 +192,34 @@ inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<
   const Header h = Header::read(f.data());
   Message& m = out.emplace_back();
   read_message(f.data(), h, m);
-  const std::optional<std::uint64_t> time = device_time_us(m);
+  const std::optional<ClockField> clock = clock_field(h.msgid);
+  const std::optional<std::uint64_t> time = clock ? std::optional(read_clock(m.payload.data(), *clock)) : std::nullopt;
   // Each component numbers its own frames, mod 256.
-  const auto component = static_cast<std::uint16_t>(h.sysid << 8 | h.compid);
-  const auto [last, first] = last_seq.try_emplace(component, h.seq);
-  auto& times = last_time_us[component];
-  if (!first) {
-    const auto previous_time = time ? times.find(h.msgid) : times.end();
-    if (previous_time != times.end() && is_restart(last->second, h.seq, previous_time->second, *time)) {
+  const auto id = static_cast<std::uint16_t>(h.sysid << 8 | h.compid);
+  if (last_found >= components.size() || components[last_found].id != id) {
+    last_found = static_cast<std::size_t>(
+        std::find_if(components.begin(), components.end(), [id](const Component& c) { return c.id == id; }) -
+        components.begin());
+  }
+  if (last_found == components.size()) {
+    components.push_back({.id = id, .last_seq = h.seq});
+  } else {
+    Component& c = components[last_found];
+    if (time && c.has_time[clock->slot] && is_restart(c.last_seq, h.seq, c.last_time_us[clock->slot], *time)) {
       // Its numbers start again: the step to them is no loss.
       ++counters.device_restarts;
       ++clock_epoch;
-      times.clear();
-    } else if (count_sequence_step(last->second, h.seq, counters) == 0) {
+      c.has_time.fill(false);
+    } else if (count_sequence_step(c.last_seq, h.seq, counters) == 0) {
       out.pop_back();  // sent again
       return false;
     }
-    last->second = h.seq;
+    c.last_seq = h.seq;
   }
-  if (time) times[h.msgid] = *time;
+  if (time) {
+    components[last_found].last_time_us[clock->slot] = *time;
+    components[last_found].has_time[clock->slot] = true;
+  }
   if (!is_decoded(h.msgid)) ++counters.unsupported;
   m.clock_epoch = clock_epoch;
   return true;

@@ -8,7 +8,6 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "protocol/calibration.hpp"
@@ -66,9 +65,9 @@ struct FrameCheck {
     // well formed, but a MAVLink 1 length its id's message (as known here) cannot have: another dialect's or an older
     // version's message of that id, which nothing here can check. A stream's decoder takes it for a false start.
     other_layout,
-    bad_crc,     // a known id whose CRC does not match
-    malformed,   // no STX, an incompat flag this decoder cannot parse, or a MAVLink 1 length its message cannot have
-    cut_short,   // the bytes end before the header or the frame does
+    bad_crc,    // a known id whose CRC does not match
+    malformed,  // no STX, an incompat flag this decoder cannot parse, or a MAVLink 1 length its message cannot have
+    cut_short,  // the bytes end before the header or the frame does
   };
   Status status = Status::malformed;
   std::size_t size = 0;
@@ -101,10 +100,18 @@ class Decoder {
     Judgement judge(std::span<const std::uint8_t> candidate, bool at_end) const;
     bool take(std::span<const std::uint8_t> frame, std::vector<Message>& out, DecoderCounters& counters);
 
-    std::unordered_map<std::uint16_t, std::uint8_t> last_seq;  // by sysid << 8 | compid
-    // Each component's last device time per timed message id (time_usec, or time_boot_ms in us): a component whose
-    // next frame is not the next number and whose clock went back restarted (protocol::is_restart).
-    std::unordered_map<std::uint16_t, std::unordered_map<std::uint32_t, std::uint64_t>> last_time_us;
+    // What the decoder remembers of one sending component: its last sequence number and, per timed message kind, its
+    // last device time (time_usec, or time_boot_ms in us). A component whose next frame is not the next number and
+    // whose clock went back restarted (protocol::is_restart). A link carries a few components: a flat list searched
+    // from the last one found costs no allocation and no tree look-up per frame.
+    struct Component {
+      std::uint16_t id = 0;  // sysid << 8 | compid
+      std::uint8_t last_seq = 0;
+      std::array<std::uint64_t, kClockSlots> last_time_us{};
+      std::array<bool, kClockSlots> has_time{};
+    };
+    std::vector<Component> components;
+    std::size_t last_found = 0;
     std::uint32_t clock_epoch = 0;
   };
 

@@ -83,6 +83,16 @@ std::optional<Decoded> read_any(std::uint32_t msgid, std::span<const std::uint8_
 }  // namespace
 
 const MessageSpec* message_spec(std::uint32_t msgid) {
+  // Every frame asks: the ids of MAVLink 1's range (where the IMU, attitude and position messages are) by index, the
+  // rest by halves.
+  static const std::array<const MessageSpec*, 256> kByLowId = [] {
+    std::array<const MessageSpec*, 256> table{};
+    for (const MessageSpec& spec : message_specs()) {
+      if (spec.id < table.size()) table[spec.id] = &spec;
+    }
+    return table;
+  }();
+  if (msgid < kByLowId.size()) return kByLowId[msgid];
   const std::span<const MessageSpec> specs = message_specs();
   const auto it = std::ranges::lower_bound(specs, msgid, {}, &MessageSpec::id);
   return it != specs.end() && it->id == msgid ? &*it : nullptr;
@@ -95,6 +105,44 @@ std::optional<std::uint8_t> crc_extra(std::uint32_t msgid) {
 }
 
 bool is_decoded(std::uint32_t msgid) { return has_id(msgid, std::type_identity<Decoded>{}); }
+
+namespace {
+
+template <typename M>
+std::optional<ClockField> clock_field_of(std::size_t slot) {
+  M m{};
+  std::size_t offset = 0;
+  std::optional<ClockField> out;
+  M::for_each_field(m, [&](std::string_view name, const auto& field) {
+    if (!out && (name == "time_usec" || name == "time_boot_ms"))
+      out = ClockField{slot, offset, sizeof(field), name == "time_boot_ms" ? 1000u : 1u};
+    offset += sizeof(field);
+  });
+  return out;
+}
+
+template <std::size_t... I>
+std::array<std::pair<std::uint32_t, std::optional<ClockField>>, sizeof...(I)> clock_table(std::index_sequence<I...>) {
+  return {
+      {{std::variant_alternative_t<I, Decoded>::kId, clock_field_of<std::variant_alternative_t<I, Decoded>>(I)}...}};
+}
+
+const auto kClockTable = clock_table(std::make_index_sequence<kClockSlots>{});
+
+}  // namespace
+
+std::optional<ClockField> clock_field(std::uint32_t msgid) {
+  for (const auto& [id, field] : kClockTable) {
+    if (id == msgid) return field;
+  }
+  return std::nullopt;
+}
+
+std::uint64_t read_clock(const std::uint8_t* payload, const ClockField& field) {
+  const std::uint64_t ticks = field.size == 8 ? load_le<std::uint64_t>(payload + field.offset)
+                                              : std::uint64_t{load_le<std::uint32_t>(payload + field.offset)};
+  return ticks * field.to_us;
+}
 
 std::optional<Decoded> decode_payload(std::uint32_t msgid, std::span<const std::uint8_t> payload) {
   return read_any(msgid, payload, std::type_identity<Decoded>{});

@@ -177,6 +177,20 @@ using Decoded =
 
 bool is_decoded(std::uint32_t msgid);
 
+// Where a decoded message carries its sender's clock (time_usec, or time_boot_ms): read off for_each_field's wire
+// order, so that the decoder reads a frame's clock without decoding the frame.
+struct ClockField {
+  std::size_t slot = 0;     // the message's index in Decoded: one clock per message kind and sender
+  std::size_t offset = 0;   // payload bytes before it
+  std::size_t size = 0;     // 8 (time_usec) or 4 (time_boot_ms)
+  std::uint64_t to_us = 1;  // 1, or 1000 for milliseconds
+};
+inline constexpr std::size_t kClockSlots = std::variant_size_v<Decoded>;
+// nullopt for an id without a clock, decoded or not.
+std::optional<ClockField> clock_field(std::uint32_t msgid);
+// The clock in microseconds, from a payload zero-filled beyond what was received (as Message's is).
+std::uint64_t read_clock(const std::uint8_t* payload, const ClockField& field);
+
 // The typed fields of a payload as received; bytes missing at the end (MAVLink 2 truncation) read as zero.
 std::optional<Decoded> decode_payload(std::uint32_t msgid, std::span<const std::uint8_t> payload);
 

@@ -820,7 +820,7 @@ Bytes timed_frames(std::uint8_t first_seq, std::uint64_t first_time_us, int coun
 
 TEST(MavlinkDecoder, ARebootedSenderIsARestartNotALoss) {
   Bytes stream = timed_frames(100, 600'000'000, 20);  // seq 100..139, ten minutes after boot
-  append(stream, timed_frames(0, 1'000, 20));          // seq 0..39 from boot again
+  append(stream, timed_frames(0, 1'000, 20));         // seq 0..39 from boot again
   const Decoding r = decode_stream(stream);
   ASSERT_EQ(r.frames.size(), 80u);
   EXPECT_EQ(r.counters.device_restarts, 1u);
@@ -1068,6 +1068,38 @@ TEST(MavlinkSample, OtherMessagesAreNotSamples) {
   Calibration c;
   EXPECT_EQ(to_sample(make_message(kAttitude, {}), &c), std::nullopt);
   EXPECT_EQ(to_sample(decode_stream(heartbeat(0)).frames.at(0), &c), std::nullopt);
+}
+
+}  // namespace
+}  // namespace imubridge::protocol::mavlink
+
+namespace imubridge::protocol::mavlink {
+namespace {
+
+// The decoder reads each frame's clock straight off the payload (clock_field), without decoding it: for every message
+// kind that has one, the value read is the one the typed decoding gives.
+TEST(MavlinkClock, ReadOffThePayloadItIsTheDecodedMessagesOwn) {
+  const HighresImu highres{.time_usec = 0x0123456789ABCDEFull, .xacc = 1.5f};
+  const Attitude attitude{.time_boot_ms = 4'000'001u, .roll = 0.25f};
+  for (const Decoded& message : {Decoded{highres}, Decoded{attitude}}) {
+    const std::vector<std::uint8_t> payload = encode_payload(message);
+    const std::optional<ClockField> clock = clock_field(message_id(message));
+    ASSERT_TRUE(clock.has_value()) << message_id(message);
+    const std::uint64_t expected = std::visit(
+        []<typename M>(const M& m) -> std::uint64_t {
+          if constexpr (requires { m.time_usec; }) {
+            return m.time_usec;
+          } else {
+            return std::uint64_t{m.time_boot_ms} * 1000;
+          }
+        },
+        message);
+    EXPECT_EQ(read_clock(payload.data(), *clock), expected) << message_id(message);
+  }
+  EXPECT_EQ(clock_field(HighresImu::kId)->size, 8u);
+  EXPECT_EQ(clock_field(Attitude::kId)->to_us, 1000u);
+  EXPECT_NE(clock_field(HighresImu::kId)->slot, clock_field(Attitude::kId)->slot);
+  EXPECT_FALSE(clock_field(0).has_value());  // HEARTBEAT: no clock
 }
 
 }  // namespace
