@@ -225,7 +225,7 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
                      const std::vector<std::int64_t>& validate_ids) {
   const auto start = std::chrono::steady_clock::now();
   est::IdentifyOptions options = identify_options(o);
-  if (options.velocity == est::VelocitySource::eq12)
+  if (o.velocity && options.velocity == est::VelocitySource::eq12)
     throw std::invalid_argument(
         "--velocity eq12 takes one session: its open-loop integral would run from one flight into the next");
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
