@@ -27,9 +27,7 @@ std::string text_of(const std::uint8_t* p, std::size_t size) {
 }
 
 // A float field as an integer: truncated, 0 when NaN or beyond int64 (a cast would be undefined).
-std::int64_t to_integer(double v) {
-  return v > -9.2e18 && v < 9.2e18 ? static_cast<std::int64_t>(v) : 0;
-}
+std::int64_t to_integer(double v) { return v > -9.2e18 && v < 9.2e18 ? static_cast<std::int64_t>(v) : 0; }
 
 // The scaling a format character itself implies.
 double implied_scale(char type) {
@@ -63,6 +61,21 @@ std::string hex_byte(std::uint8_t b) {
   return std::string("0x") + kDigits[b >> 4] + kDigits[b & 15];
 }
 
+// A name or type read from the log, as a damage message may show it: one line, whatever bytes a damaged log holds
+// (anything outside printable ASCII as \xNN).
+std::string printable(std::string_view text) {
+  std::string out;
+  for (const char c : text) {
+    const auto b = static_cast<std::uint8_t>(c);
+    if (b >= 0x20 && b < 0x7f && c != '\\') {
+      out += c;
+    } else {
+      out += "\\x" + hex_byte(b).substr(2);
+    }
+  }
+  return out;
+}
+
 // The message a FMT record at `p` (kFmtLength bytes) defines, or why it cannot.
 std::variant<Message, std::string> read_fmt(const std::uint8_t* p) {
   Message m;
@@ -71,7 +84,7 @@ std::variant<Message, std::string> read_fmt(const std::uint8_t* p) {
   m.name = text_of(p + 5, 4);
   m.format = text_of(p + 9, 16);
   const std::vector<std::string> names = split_columns(text_of(p + 25, 64));
-  const std::string what = "a FMT for type " + std::to_string(m.type) + " (" + m.name + ")";
+  const std::string what = "a FMT for type " + std::to_string(m.type) + " (" + printable(m.name) + ")";
   // The log's first record defines FMT itself; a FMT for FMT in any other layout cannot be how this log is written.
   if (m.type == kFmtType && (m.length != kFmtLength || m.format != "BBnNZ")) return what + " redefining FMT otherwise";
   if (names.size() != m.format.size()) {
@@ -82,7 +95,7 @@ std::variant<Message, std::string> read_fmt(const std::uint8_t* p) {
   for (std::size_t i = 0; i < m.format.size(); ++i) {
     const char type = m.format[i];
     const std::size_t size = field_size(type);
-    if (size == 0) return what + " with the unknown field type '" + std::string(1, type) + "'";
+    if (size == 0) return what + " with the unknown field type '" + printable(std::string(1, type)) + "'";
     m.fields.push_back({.name = names[i], .type = type, .offset = offset, .scale = implied_scale(type)});
     offset += size;
   }
@@ -116,7 +129,8 @@ void apply_units(Log& log) {
   const auto id_of = [](const Message& m, std::size_t r, std::size_t f) { return static_cast<char>(m.integer(r, f)); };
   if (unit) {
     const auto id = unit->field("Id"), label = unit->field("Label");
-    for (std::size_t r = 0; id && label && r < unit->size(); ++r) log.units[id_of(*unit, r, *id)] = unit->text(r, *label);
+    for (std::size_t r = 0; id && label && r < unit->size(); ++r)
+      log.units[id_of(*unit, r, *id)] = unit->text(r, *label);
   }
   if (mult) {
     const auto id = mult->field("Id"), value = mult->field("Mult");
@@ -290,7 +304,8 @@ Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& pro
         // try_emplace moves `defined` only when the type is new, so a repeated FMT can be compared with the first.
         const auto [it, added] = log.messages.try_emplace(defined.type, std::move(defined));
         if (!added && !same_definition(it->second, defined)) {
-          damage("a FMT redefining type " + std::to_string(it->first) + " (" + it->second.name + ") otherwise");
+          damage("a FMT redefining type " + std::to_string(it->first) + " (" + printable(it->second.name) +
+                 ") otherwise");
           break;
         }
       }
@@ -305,7 +320,7 @@ Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& pro
     }
     Message& m = it->second;
     if (left < m.length) {
-      damage("a " + m.name + " record cut short (" + std::to_string(left) + " bytes of its " +
+      damage("a " + printable(m.name) + " record cut short (" + std::to_string(left) + " bytes of its " +
              std::to_string(m.length) + "; the file ends)");
       break;
     }

@@ -282,6 +282,17 @@ TEST(DataflashReader, RefusesWhatIsNoDataflashLogInOneLine) {
   EXPECT_EQ(error(Writer().bytes), "");  // a log of one FMT is a log, of nothing
 }
 
+// A damaged log's names are whatever bytes it holds: the damage still reads as one line (dataflash_fuzz found a
+// name with a newline in it).
+TEST(DataflashReader, DamageShowsTheLogsNamesOnOneLine) {
+  Writer w;
+  w.fmt(24, std::string_view("BA\n\x10", 4), "BBB", "");  // three field types, no field names
+  const dataflash::Log log = dataflash::parse(w.bytes);
+  ASSERT_TRUE(log.damage.has_value());
+  EXPECT_EQ(log.damage->find('\n'), std::string::npos) << *log.damage;
+  EXPECT_NE(log.damage->find("(BA\\x0a\\x10)"), std::string::npos) << *log.damage;
+}
+
 // Damage ends reading where it is, in one line that says what and where; the records before it are all there.
 TEST(DataflashReader, ReadsUpToTheDamage) {
   const Writer w = old_log();
