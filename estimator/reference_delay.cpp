@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -38,23 +39,25 @@ struct ImuSide {
       previous = a;
     }
   }
-  // The sample pair around tau and where between them (clamped to the data).
-  std::pair<std::size_t, double> around(double tau) const {
-    const std::size_t i = std::clamp<std::size_t>(
-        static_cast<std::size_t>(std::upper_bound(s.t.begin(), s.t.end(), tau) - s.t.begin()), 1, s.size() - 1);
+  // Where tau falls: the sample pair around it and where between them (clamped to the data). `hint` is the first
+  // sample after the previous tau asked with it: the lags move each box by a step or so, so walking from there finds
+  // the same pair as a search over the whole series (std::upper_bound) at a fraction of the cost.
+  struct Place {
+    std::size_t i;
+    double f;
+  };
+  Place locate(double tau, std::size_t& hint) const {
+    std::size_t after = std::min(hint, s.size());  // the first sample later than tau
+    while (after > 0 && s.t[after - 1] > tau) --after;
+    while (after < s.size() && !(s.t[after] > tau)) ++after;
+    hint = after;
+    const std::size_t i = std::clamp<std::size_t>(after, 1, s.size() - 1);
     return {i, std::clamp((tau - s.t[i - 1]) / (s.t[i] - s.t[i - 1]), 0.0, 1.0)};
   }
-  Vector2d integral(double tau) const {
-    const auto [i, f] = around(tau);
-    return c[i - 1] + f * (c[i] - c[i - 1]);
-  }
-  Vector3d gyro(double tau) const {
-    const auto [i, f] = around(tau);
-    return s.gyro[i - 1] + f * (s.gyro[i] - s.gyro[i - 1]);
-  }
-  Eigen::Matrix3d attitude(double tau) const {
-    const auto [i, f] = around(tau);
-    return s.reference->attitude[f < 0.5 ? i - 1 : i].toRotationMatrix();
+  Vector2d integral(const Place& p) const { return c[p.i - 1] + p.f * (c[p.i] - c[p.i - 1]); }
+  Vector3d gyro(const Place& p) const { return s.gyro[p.i - 1] + p.f * (s.gyro[p.i] - s.gyro[p.i - 1]); }
+  Eigen::Matrix3d attitude(const Place& p) const {
+    return s.reference->attitude[p.f < 0.5 ? p.i - 1 : p.i].toRotationMatrix();
   }
 };
 
@@ -111,8 +114,8 @@ std::vector<Box> reference_boxes(std::span<const double> t, std::span<const Vect
 std::string describe(const ReferenceDelay& d) {
   if (d.usable()) return format("%.3f s (correlation %.2f)", d.delay_s, d.correlation);
   if (d.boxes == 0) return "cannot be estimated (" + *d.unusable + ")";
-  return "cannot be estimated (" + *d.unusable + format("; best match %.3f s at correlation %.2f)", d.delay_s,
-                                                         d.correlation);
+  return "cannot be estimated (" + *d.unusable +
+         format("; best match %.3f s at correlation %.2f)", d.delay_s, d.correlation);
 }
 
 ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const double> reference_t,
@@ -126,7 +129,8 @@ ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const
     out.unusable = "too few IMU samples";
     return out;
   }
-  const std::vector<Box> boxes = reference_boxes(reference_t, reference_velocity_ned, series.t.front(), series.t.back());
+  const std::vector<Box> boxes =
+      reference_boxes(reference_t, reference_velocity_ned, series.t.front(), series.t.back());
   out.boxes = boxes.size();
   if (boxes.size() < kMinDelayBoxes) {
     out.boxes = 0;
@@ -150,15 +154,19 @@ ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const
   // R (w_dot x r) = R skew(w_dot) r, linear in the unknown lever arm r.
   Eigen::MatrixXd n = Eigen::MatrixXd::Zero(rows, 5);
   std::vector<double> rho;
+  // Each box's last places in the IMU's samples (its start, end and middle), where the next lag's search begins.
+  std::vector<std::array<std::size_t, 3>> hints(boxes.size(), {0, 0, 0});
   for (int k = -half; k <= half; ++k) {
     const double lag = k * kDelayLagStep;
     for (std::size_t b = 0; b < boxes.size(); ++b) {
       // The reference stamped t describes the vehicle at t - lag.
       const double t0 = boxes[b].t0 - lag, t1 = boxes[b].t1 - lag, span = t1 - t0;
       const auto row = static_cast<Eigen::Index>(2 * b);
-      y.segment<2>(row) = (imu.integral(t1) - imu.integral(t0)) / span;
-      const Vector3d w_dot = (imu.gyro(t1) - imu.gyro(t0)) / span;
-      const Eigen::Matrix3d tangential = imu.attitude(0.5 * (t0 + t1)) * skew(w_dot);  // times r: R (w_dot x r)
+      const ImuSide::Place start = imu.locate(t0, hints[b][0]), end = imu.locate(t1, hints[b][1]);
+      y.segment<2>(row) = (imu.integral(end) - imu.integral(start)) / span;
+      const Vector3d w_dot = (imu.gyro(end) - imu.gyro(start)) / span;
+      // times r: R (w_dot x r)
+      const Eigen::Matrix3d tangential = imu.attitude(imu.locate(0.5 * (t0 + t1), hints[b][2])) * skew(w_dot);
       n.block<2, 3>(row, 0) = tangential.topRows<2>();
       n(row, 3) = 1.0;
       n(row + 1, 4) = 1.0;
@@ -186,8 +194,8 @@ ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const
     out.unusable = format("the vehicle hardly accelerates: %.3f m/s^2 RMS horizontally, %.2f needed",
                           out.acceleration_rms, kMinDelayAcceleration);
   } else if (out.correlation < kMinDelayCorrelation) {
-    out.unusable = format("the accelerations correlate %.2f at best, %.2f needed", out.correlation,
-                          kMinDelayCorrelation);
+    out.unusable =
+        format("the accelerations correlate %.2f at best, %.2f needed", out.correlation, kMinDelayCorrelation);
   } else {
     // A second peak nearly as high, away from the first one's flanks, makes the lag ambiguous.
     const auto away = static_cast<std::size_t>(std::lround(kDelayBoxSeconds / kDelayLagStep / 2.0));
