@@ -24,9 +24,7 @@
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/report.hpp"
-#include "diagnose/residual_analysis.hpp"
 #include "diagnose/search.hpp"
-#include "diagnose/signals.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/params.hpp"
 #include "pipeline/session_series.hpp"
@@ -268,10 +266,7 @@ int run(const DiagnoseCliOptions& o) {
     flights = read_flight_set(store, fit_ids, validate_ids, reading, o.windows);
     if (!options.velocity)
       options.velocity = flights->every_reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
-    // The filter error method averages blocks of samples by index: no block may straddle two flights.
-    joined = join(*flights, *options.velocity == dg::VelocitySource::filter
-                                ? dg::identification_block(dg::sample_rate_hz(flights->flights.front().t))
-                                : 1);
+    joined = join(*flights, *options.velocity == dg::VelocitySource::filter);
     options.train = joined->train;
     options.validate = joined->validate;
     options.session = o.db + "#" + o.sessions + (o.validate_sessions ? "/" + *o.validate_sessions : "");

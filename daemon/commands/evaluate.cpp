@@ -145,30 +145,26 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
                           {"non_finite", session.counts.non_finite},
                           {"time_not_increasing", session.counts.time_not_increasing},
                           {"outside_reference", session.counts.outside_reference}};
-  if ((o.baseline_train || o.baseline_sessions) && !anchor_error.empty()) {
-    out["least_squares_error"] = anchor_error;
-  } else if (o.baseline_train || o.baseline_sessions) {
+  if (o.baseline_train || o.baseline_sessions) {
     // Fitted on its own window (of this flight, or of --baseline-session's), scored on the evaluation window. A line
-    // that cannot be fitted or inverted here (no drag in it) is said in its place; the rest is still scored.
-    Anchor anchor;
-    est::LeastSquaresDragScores a;
+    // that cannot be fitted or inverted (no drag in it) is said in its place; the rest is still scored.
     try {
-      anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
-      a = anchor_step([&] { return est::score_least_squares_drag(session.series, anchor.fit, scored); });
+      if (!anchor_error.empty()) throw AnchorUnfit(anchor_error);
+      const Anchor anchor = fixed_anchor ? *fixed_anchor : fit_anchor(session, id, o);
+      const est::LeastSquaresDragScores a =
+          anchor_step([&] { return est::score_least_squares_drag(session.series, anchor.fit, scored); });
+      out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
+      out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
+      json train = json::array();
+      for (const est::TimeWindow& w : anchor.train) train.push_back({w.start, w.end});
+      out["least_squares"] = {{"train_sessions", anchor.sessions},
+                              {"train_windows", train},
+                              {"k", {anchor.fit.k.x(), anchor.fit.k.y()}},
+                              {"b", {anchor.fit.b.x(), anchor.fit.b.y()}},
+                              {"blocks_scored", a.blocks}};
     } catch (const AnchorUnfit& e) {
       out["least_squares_error"] = e.what();
-      print_reference_delay(session);
-      return out;
     }
-    out["rmse_m_s"]["least_squares_means"] = to_json(a.raw);
-    out["rmse_m_s"]["least_squares_smoothed"] = to_json(a.smoothed);
-    json train = json::array();
-    for (const est::TimeWindow& w : anchor.train) train.push_back({w.start, w.end});
-    out["least_squares"] = {{"train_sessions", anchor.sessions},
-                            {"train_windows", train},
-                            {"k", {anchor.fit.k.x(), anchor.fit.k.y()}},
-                            {"b", {anchor.fit.b.x(), anchor.fit.b.y()}},
-                            {"blocks_scored", a.blocks}};
   }
   print_reference_delay(session);
   return out;

@@ -14,6 +14,8 @@
 #include <vector>
 
 #include "daemon/commands/session_windows.hpp"
+#include "diagnose/residual_analysis.hpp"
+#include "diagnose/signals.hpp"
 #include "estimator/flight_set.hpp"
 #include "estimator/identify.hpp"
 #include "estimator/velocity_scores.hpp"
@@ -39,8 +41,8 @@ inline void add_flight_set_options(CLI::App& cmd, std::string& sessions, std::op
 struct FlightSetReading {
   std::vector<std::int64_t> ids;  // the fitting flights, then the validating ones
   std::size_t fitting = 0;
-  std::vector<estimator::ImuSeries> flights;   // each cut to its window
-  std::vector<estimator::ImuSeries> whole;     // each as read: a filter scoring a window runs from the flight start
+  // Each as read, whole: a filter scoring a window runs from the flight's start; join() cuts each to its window.
+  std::vector<estimator::ImuSeries> flights;
   std::vector<estimator::TimeWindow> windows;  // each flight's window, in its own time
   std::string identity;                        // "flights:imu:…,imu:…": what conditions fitted over the set name
   bool every_reference = true;
@@ -76,8 +78,7 @@ inline FlightSetReading read_flight_set(const store::Store& store, const std::ve
                                                          session.series.t, fits ? "fit" : "validation");
     out.identity += (i == 0 ? "" : ",") + estimator::flight_identity(session.series);
     out.every_reference = out.every_reference && session.series.reference.has_value();
-    out.flights.push_back(estimator::cut(session.series, window));
-    out.whole.push_back(session.series);
+    out.flights.push_back(session.series);
     out.windows.push_back(window);
   }
   return out;
@@ -88,9 +89,14 @@ struct JoinedFlights {
   estimator::TimeWindow train, validate;  // the fitting flights' span and the validating flights', in the set's time
 };
 
-// `align`: see join_flights(). Refuses fitting flights that hold less than estimator::kMinTrainSeconds.
-inline JoinedFlights join(const FlightSetReading& r, std::size_t align) {
-  JoinedFlights out{estimator::join_flights(r.flights, align), {}, {}};
+// Each flight cut to its window and joined. `for_filter`: the fit is the filter error method's, which averages
+// blocks of samples by index, so each flight keeps whole blocks (none straddles two flights). Refuses fitting
+// flights that hold less than estimator::kMinTrainSeconds.
+inline JoinedFlights join(const FlightSetReading& r, bool for_filter) {
+  std::vector<estimator::ImuSeries> cut;
+  for (std::size_t i = 0; i < r.flights.size(); ++i) cut.push_back(estimator::cut(r.flights[i], r.windows[i]));
+  const std::size_t align = for_filter ? diagnose::identification_block(diagnose::sample_rate_hz(cut.front().t)) : 1;
+  JoinedFlights out{estimator::join_flights(cut, align), {}, {}};
   const std::vector<estimator::TimeWindow>& placed = out.set.placed;
   double fit_seconds = 0.0;
   for (std::size_t i = 0; i < r.fitting; ++i) fit_seconds += placed[i].end - placed[i].start;
@@ -132,8 +138,8 @@ inline void print_flight_map(std::FILE* to, const FlightSetReading& r, const Joi
 // The accelerometer offset a new flight carries, measured on the validating flights when each has a reference
 // (estimator::measure_transfer_offset) and kept in `params` for the live filter; said on `to` either way.
 inline void measure_transfer(const FlightSetReading& r, estimator::ModelParams& params, std::FILE* to) {
-  const std::span<const estimator::ImuSeries> validating(r.whole.begin() + static_cast<std::ptrdiff_t>(r.fitting),
-                                                         r.whole.end());
+  const std::span<const estimator::ImuSeries> validating(r.flights.begin() + static_cast<std::ptrdiff_t>(r.fitting),
+                                                         r.flights.end());
   const std::span<const estimator::TimeWindow> windows(r.windows.begin() + static_cast<std::ptrdiff_t>(r.fitting),
                                                        r.windows.end());
   if (!std::all_of(validating.begin(), validating.end(), [](const auto& f) { return f.reference.has_value(); })) {

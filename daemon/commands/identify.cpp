@@ -22,8 +22,6 @@
 #include "daemon/commands/session_windows.hpp"
 #include "daemon/commands/velocity_print.hpp"
 #include "diagnose/filter_identification.hpp"
-#include "diagnose/residual_analysis.hpp"
-#include "diagnose/signals.hpp"
 #include "estimator/constants.hpp"
 #include "estimator/params.hpp"
 #include "estimator/plausibility.hpp"
@@ -233,11 +231,7 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
   const FlightSetReading flights =
       read_flight_set(store, fit_ids, validate_ids, reading_options(o, options), o.windows);
   choose_velocity(o, options, flights.every_reference);
-  // The filter error method averages blocks of samples by index: no block may straddle two flights.
-  const std::size_t align = options.velocity == est::VelocitySource::filter
-                                ? diagnose::identification_block(diagnose::sample_rate_hz(flights.flights.front().t))
-                                : 1;
-  const JoinedFlights joined = join(flights, align);
+  const JoinedFlights joined = join(flights, options.velocity == est::VelocitySource::filter);
   options.train = joined.train;
   options.validate = joined.validate;
   est::IdentifyResult result = options.velocity == est::VelocitySource::filter
