@@ -186,10 +186,11 @@ TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::
   constexpr double kHonest = 2.0;  // two axes
   out.flights = flights.size();
   out.nees_default = nees(kTransferredOffsetStd);
-  if (nees(0.0) <= kHonest) return out.nees = nees(0.0), out;
-  if (nees(kMaxTransferOffsetStd) > kHonest) {
+  // Each end of the bracket is one run over the flights, kept: no offset, and the largest.
+  if (const double without = nees(0.0); without <= kHonest) return out.nees = without, out;
+  if (const double largest = nees(kMaxTransferOffsetStd); largest > kHonest) {
     out.offset_std = kMaxTransferOffsetStd, out.at_limit = true;
-    out.nees = nees(kMaxTransferOffsetStd);
+    out.nees = largest;
     return out;
   }
   // NEES falls as the std grows: bisect in log space, 1e-3 .. kMaxTransferOffsetStd m/s^2, to 1 %.
