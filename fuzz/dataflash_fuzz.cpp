@@ -3,40 +3,32 @@
 // does not hold together: every message's records fill its data exactly, every field of every record is readable,
 // and damage reads as one line.
 #include <cstdint>
-#include <cstdlib>
 #include <span>
 #include <string>
 
+#include "fuzz/fuzz_require.hpp"
 #include "replay/dataflash.hpp"
 
 namespace dataflash = imubridge::replay::dataflash;
-
-namespace {
-
-void require(bool condition) {
-  if (!condition) std::abort();
-}
-
-}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {
     const dataflash::Log log = dataflash::parse(std::span(data, size));
     std::uint64_t records = 0;
     for (const auto& [type, m] : log.messages) {
-      require(m.type == type && m.length >= dataflash::kHeaderSize);
-      require(m.data.size() == m.size() * (m.length - dataflash::kHeaderSize));
+      FUZZ_REQUIRE(m.type == type && m.length >= dataflash::kHeaderSize);
+      FUZZ_REQUIRE(m.data.size() == m.size() * (m.length - dataflash::kHeaderSize));
       records += m.size();
       for (std::size_t r = 0; r < m.size(); ++r) {
         for (std::size_t f = 0; f < m.fields.size(); ++f) {
           (void)m.value(r, f);
           (void)m.integer(r, f);
-          require(m.text(r, f).size() <= dataflash::field_size(m.fields[f].type));
+          FUZZ_REQUIRE(m.text(r, f).size() <= dataflash::field_size(m.fields[f].type));
         }
       }
     }
-    require(records <= log.records);
-    if (log.damage) require(log.damage->find('\n') == std::string::npos);
+    FUZZ_REQUIRE(records <= log.records);
+    if (log.damage) FUZZ_REQUIRE(log.damage->find('\n') == std::string::npos);
   } catch (const dataflash::ParseError&) {
   }
   return 0;

@@ -5,25 +5,17 @@
 // re-encode to the payload bytes they came from; JSON and sample conversion take anything.
 #include <algorithm>
 #include <cstdint>
-#include <cstdlib>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <vector>
 
+#include "fuzz/fuzz_require.hpp"
 #include "protocol/mavlink.hpp"
 #include "tests/decoder_harness.hpp"
 
 namespace mavlink = imubridge::protocol::mavlink;
 namespace harness = imubridge::protocol::harness;
-
-namespace {
-
-void require(bool condition) {
-  if (!condition) std::abort();
-}
-
-}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
@@ -32,21 +24,21 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
   const auto whole = harness::decode_pieces(mavlink::Decoder{}, {stream});
   const auto parts = harness::decode_split(mavlink::Decoder{}, stream, split);
-  require(parts.frames == whole.frames);
-  require(parts.counters == whole.counters);
+  FUZZ_REQUIRE(parts.frames == whole.frames);
+  FUZZ_REQUIRE(parts.counters == whole.counters);
 
   std::vector<std::uint8_t> again;
   for (const mavlink::Message& m : whole.frames) mavlink::encode(m, again);
   const auto& c = whole.counters;
-  require(c.bytes_in == stream.size());
-  require(c.frames_out == whole.frames.size());
-  require(c.bytes_in == again.size() + c.bytes_discarded);
-  require(harness::decode_pieces(mavlink::Decoder{}, {again}).frames == whole.frames);
+  FUZZ_REQUIRE(c.bytes_in == stream.size());
+  FUZZ_REQUIRE(c.frames_out == whole.frames.size());
+  FUZZ_REQUIRE(c.bytes_in == again.size() + c.bytes_discarded);
+  FUZZ_REQUIRE(harness::decode_pieces(mavlink::Decoder{}, {again}).frames == whole.frames);
 
   std::map<int, int> last_seq;  // by sysid << 8 | compid
   for (const mavlink::Message& m : whole.frames) {
     const auto [last, first] = last_seq.try_emplace(m.sysid << 8 | m.compid, m.seq);
-    require(first || last->second != m.seq);
+    FUZZ_REQUIRE(first || last->second != m.seq);
     last->second = m.seq;
   }
 
@@ -54,7 +46,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   for (const mavlink::Message& m : whole.frames) {
     if (const auto typed = mavlink::decode(m)) {
       const std::vector<std::uint8_t> payload = mavlink::encode_payload(*typed);
-      require(std::equal(payload.begin(), payload.end(), m.payload.begin()));
+      FUZZ_REQUIRE(std::equal(payload.begin(), payload.end(), m.payload.begin()));
     }
     (void)nlohmann::json(m).dump();
     (void)mavlink::to_sample(m, &calibration);
