@@ -1,7 +1,8 @@
 #pragma once
 // The model a diagnosis ends with, as the live estimator runs it: a fitted diagnose::Model (base plus effects) turned
 // into PARAMS.json's estimator::ModelParams, so `run`, `replay` and `evaluate` estimate with exactly what the loop
-// found (docs/effects.md, "Live"). One place maps every effect's parameters onto the estimator's.
+// found (docs/effects.md, "Live"). The base's parameters are mapped here; each effect maps its own
+// (Effect::live_path, Effect::to_live).
 #include <span>
 #include <string>
 #include <vector>

@@ -25,7 +25,8 @@ constexpr double kDegPerRad = 180.0 / kPi;
 constexpr double kAngleAgreement = 1e-9;  // rad
 
 // diagnose's library (diagnose/effects/library.cpp), in its order. The estimator does not link diagnose; a new
-// effect there must be added here, with how the live estimator runs it (docs/effects.md, "Live").
+// effect there must be added here (tests/live_model_test.cpp fails until it is); how the live estimator runs it is
+// the effect's own Effect::to_live.
 constexpr std::array<std::string_view, 12> kEffects = {
     "linear_drag", "quadratic_drag", "accel_bias",  "gyro_bias", "thrust", "time_offset",
     "accel_scale", "accel_cross",    "lever_arm_z", "vibration", "wind",   "self_consistent_velocity"};
@@ -284,6 +285,8 @@ std::vector<std::string> read_effects(const json& j, const std::string& path) {
 }
 
 }  // namespace
+
+std::span<const std::string_view> known_effects() { return kEffects; }
 
 std::optional<std::string> live_effect_refusal(std::string_view effect) {
   if (effect == "vibration") return "refused: " + std::string(kVibrationRefusal);

@@ -7,6 +7,7 @@
 #include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -84,6 +85,9 @@ ModelParams for_flight(const ModelParams& params, std::string_view flight, std::
 // Why the live drag-velocity estimator cannot run diagnose's effect `effect`, or nullopt when it runs it. An unknown
 // name is refused with the nearest known one ("did you mean"); `vibration` is refused with the reason.
 std::optional<std::string> live_effect_refusal(std::string_view effect);
+// The effects PARAMS.json may name: diagnose's library, in its order (the estimator does not link diagnose;
+// tests/live_model_test.cpp holds the two equal).
+std::span<const std::string_view> known_effects();
 
 // Reading is strict. It fills missing keys with the defaults (so files written before a key existed still read)
 // and takes radians or degrees when only one is given. It throws std::invalid_argument, naming the key's path

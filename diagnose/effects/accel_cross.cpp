@@ -28,6 +28,17 @@ class AccelCross final : public Effect {
       }
     }
   }
+  // "cross.xy": axis x reads a fraction of axis y.
+  std::string live_path(const Parameter& p) const override {
+    return "full.accel_cross." + std::to_string(row(p)) + std::to_string(axis_of(p));
+  }
+  void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
+               estimator::FullModelParams& live) const override {
+    for (std::size_t i = 0; i < p.size(); ++i) live.accel_cross(row(p[i]), axis_of(p[i])) = v[i];
+  }
+
+ private:
+  static int row(const Parameter& p) { return p.name[p.name.size() - 2] - 'x'; }
 };
 
 }  // namespace

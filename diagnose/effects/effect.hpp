@@ -13,6 +13,7 @@
 //   and measured_thrust: the base model takes T from the body-z reading instead of g.
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <span>
@@ -108,6 +109,15 @@ struct StartContext {
   const AxisValues& residual;  // training residual per diagnosed axis
 };
 
+// What an effect's live form sees (Effect::to_live).
+struct LiveContext {
+  const ModelSetup& setup;
+  // The full base's R_bs (a bias found in the residual's frame, the body's, is R_bs^T b in IMU axes); else identity.
+  Eigen::Matrix3d imu_to_body = Eigen::Matrix3d::Identity();
+  // The model's body -> NED attitude at the first sample, when it has one (with the reference or eq. 12's velocity).
+  std::function<std::optional<Eigen::Quaterniond>()> first_attitude;
+};
+
 class Effect {
  public:
   virtual ~Effect() = default;
@@ -153,10 +163,22 @@ class Effect {
     (void)predicted, (void)measured;
   }
   virtual void add_prediction(std::span<const double>, const PredictionContext&, AxisValues&) const {}
+
+  // Its live form (docs/effects.md, "Live"), next to its fit: where PARAMS.json keeps each parameter (the path its
+  // standard error is recorded under, "full.drag_linear.0"), and what the fitted values add to the live estimator's
+  // parameters. An effect the estimator does not run keeps both defaults: its parameters under
+  // "effects.NAME.PARAMETER", and nothing added.
+  virtual std::string live_path(const Parameter& p) const { return "effects." + std::string(name()) + "." + p.name; }
+  virtual void to_live(std::span<const double> values, std::span<const Parameter> parameters, const LiveContext&,
+                       estimator::FullModelParams& live) const {
+    (void)values, (void)parameters, (void)live;
+  }
 };
 
 // "x", "y" or "z".
 inline std::string axis_name(int axis) { return std::string(1, static_cast<char>('x' + axis)); }
+// The axis a per-axis parameter's name ends with: "k.x" -> 0, "bias.z" -> 2.
+inline int axis_of(const Parameter& p) { return p.name.empty() ? -1 : p.name.back() - 'x'; }
 
 // One parameter per diagnosed axis: "<prefix>.x", "<prefix>.y".
 inline std::vector<Parameter> per_axis(const ModelSetup& setup, const std::string& prefix, const std::string& unit,

@@ -1,4 +1,6 @@
 // wind: a constant air velocity; drag acts on the ground velocity minus the wind (docs/effects.md).
+#include <cmath>
+
 #include "diagnose/effects/library.hpp"
 
 namespace imubridge::diagnose {
@@ -33,6 +35,20 @@ class Wind final : public Effect {
     return {{kBreeze, 0.0}, {-kBreeze, 0.0}, {0.0, kBreeze}, {0.0, -kBreeze}};
   }
   Eigen::Vector3d wind_ned(std::span<const double> p) const override { return {p[0], p[1], 0.0}; }
+  std::string live_path(const Parameter& p) const override {
+    return std::string("full.wind.") + (p.name == "north" ? "0" : "1");
+  }
+  void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext& context,
+               estimator::FullModelParams& live) const override {
+    for (std::size_t i = 0; i < p.size(); ++i) live.wind[p[i].name == "north" ? 0 : 1] = v[i];
+    // The world the wind was fitted in: the model's attitude at the first sample. The filter's heading starts at 0
+    // there, which is the default.
+    if (context.setup.velocity == VelocitySource::filter) return;
+    if (const std::optional<Eigen::Quaterniond> q = context.first_attitude()) {
+      const Eigen::Matrix3d r = q->toRotationMatrix();
+      live.wind_heading = std::atan2(r(1, 0), r(0, 0));
+    }
+  }
 };
 
 }  // namespace
