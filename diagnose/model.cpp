@@ -5,9 +5,12 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <atomic>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <stdexcept>
+#include <thread>
 
 #include "diagnose/live_model.hpp"
 #include "diagnose/lowpass.hpp"
@@ -532,14 +535,68 @@ struct ModelCost {
   }
 };
 
-// The model's residuals on `range` as one Ceres cost with a numeric Jacobian by `method`.
-template <ceres::NumericDiffMethodType method>
-ceres::CostFunction* numeric_cost(const Model& model, Range range, std::size_t parameters, std::size_t residuals) {
-  auto* cost = new ceres::DynamicNumericDiffCostFunction<ModelCost, method>(new ModelCost{&model, range});
+// The model's residuals on `range` as one Ceres cost with a central-difference Jacobian.
+ceres::CostFunction* central_difference_cost(const Model& model, Range range, std::size_t parameters,
+                                             std::size_t residuals) {
+  auto* cost = new ceres::DynamicNumericDiffCostFunction<ModelCost, ceres::CENTRAL>(new ModelCost{&model, range});
   cost->AddParameterBlock(static_cast<int>(parameters));
   cost->SetNumResiduals(static_cast<int>(residuals));
   return cost;
 }
+
+// Forward differences for a model whose every evaluation runs the filter over the flight, the Jacobian's columns
+// shared among `threads` threads, each on a model of its own (a model's caches are not shared between threads).
+// Each column is Ceres' own forward difference (numeric_diff.h: a step of 1e-6 of the value, at least sqrt(epsilon);
+// (r(x + h) - r(x)) * (1 / h)), so the fit is bit for bit the same on any number of threads.
+class ForwardDifferenceCost final : public ceres::CostFunction {
+ public:
+  ForwardDifferenceCost(const Model& model, Range range, std::size_t parameters, std::size_t residuals,
+                        unsigned threads)
+      : range_(range), parameters_(parameters), residuals_(residuals) {
+    models_.push_back(&model);
+    for (unsigned t = 1; t < std::max(1u, threads); ++t) {
+      own_.push_back(std::make_unique<Model>(model.signals(), model.setup(), model.effects()));
+      models_.push_back(own_.back().get());
+    }
+    mutable_parameter_block_sizes()->push_back(static_cast<std::int32_t>(parameters));
+    set_num_residuals(static_cast<int>(residuals));
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* x = parameters[0];
+    if (!ModelCost{models_.front(), range_}(parameters, residuals)) return false;
+    if (jacobians == nullptr || jacobians[0] == nullptr) return true;
+    double* jacobian = jacobians[0];  // row-major: residual i, parameter j at i * parameters + j
+    std::atomic<bool> finite{true};
+    const auto columns = [&](std::size_t worker) {
+      std::vector<double> shifted(x, x + parameters_), column(residuals_);
+      const double* shifted_blocks[] = {shifted.data()};
+      const ModelCost cost{models_[worker], range_};
+      for (std::size_t j = worker; j < parameters_ && finite; j += models_.size()) {
+        const double step = std::max(std::sqrt(std::numeric_limits<double>::epsilon()), std::abs(x[j]) * 1e-6);
+        shifted[j] = x[j] + step;
+        if (!cost(shifted_blocks, column.data())) {
+          finite = false;
+          return;
+        }
+        shifted[j] = x[j];
+        const double one_over_step = 1.0 / step;
+        for (std::size_t i = 0; i < residuals_; ++i) jacobian[i * parameters_ + j] = (column[i] - residuals[i]) * one_over_step;
+      }
+    };
+    std::vector<std::thread> helpers;
+    for (std::size_t w = 1; w < models_.size(); ++w) helpers.emplace_back(columns, w);
+    columns(0);
+    for (std::thread& t : helpers) t.join();
+    return finite;
+  }
+
+ private:
+  Range range_;
+  std::size_t parameters_, residuals_;
+  std::vector<std::unique_ptr<Model>> own_;
+  std::vector<const Model*> models_;  // the caller's first
+};
 
 class RecordCost final : public ceres::IterationCallback {
  public:
@@ -555,7 +612,8 @@ class RecordCost final : public ceres::IterationCallback {
 
 }  // namespace
 
-FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations, FitStop stop) {
+FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations, FitStop stop,
+               unsigned jacobian_threads) {
   const std::vector<Parameter>& params = model.parameters();
   if (start.size() != params.size()) throw std::invalid_argument("diagnose fit: wrong number of starting values");
   const std::size_t axes = model.setup().axes.size();
@@ -570,9 +628,11 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   // Central differences, except where every evaluation runs the filter over the flight: forward ones there halve
   // the cost, and the filter's output is smooth in the parameters, so their first-order error stays far below the
   // step LM takes.
-  ceres::CostFunction* cost = model.filter_runs()
-                                  ? numeric_cost<ceres::FORWARD>(model, range, params.size(), residual_count)
-                                  : numeric_cost<ceres::CENTRAL>(model, range, params.size(), residual_count);
+  ceres::CostFunction* cost =
+      model.filter_runs()
+          ? static_cast<ceres::CostFunction*>(
+                new ForwardDifferenceCost(model, range, params.size(), residual_count, jacobian_threads))
+          : central_difference_cost(model, range, params.size(), residual_count);
   problem.AddResidualBlock(cost, nullptr, x);
   std::vector<int> held;
   for (std::size_t i = 0; i < params.size(); ++i) {

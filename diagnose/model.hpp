@@ -123,8 +123,10 @@ struct FitOutcome {
 enum class FitStop { cost, parameter_precision };
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
-// ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does.
+// ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does. When the model
+// runs the filter, its Jacobian's columns are shared among `jacobian_threads` threads; the result does not depend on
+// how many.
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50,
-               FitStop stop = FitStop::cost);
+               FitStop stop = FitStop::cost, unsigned jacobian_threads = 1);
 
 }  // namespace imubridge::diagnose

@@ -26,6 +26,8 @@
 namespace imubridge::diagnose {
 namespace {
 
+unsigned cores() { return std::max(1u, std::thread::hardware_concurrency()); }
+
 // Residuals that follow a manoeuvre stay correlated for about as long as it lasts, around a second: the effective
 // sample count looks that far.
 constexpr double kCorrelationSpanS = 1.0;
@@ -348,7 +350,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   };
   const auto fit_base = [&] {
     const Model base(signals, setup);
-    State state = settle(base, fit(base, base.base_start(train), train), train, validation);
+    State state = settle(base, fit(base, base.base_start(train), train, 50, FitStop::cost, cores()), train, validation);
     judge(base, state);
     return state;
   };
@@ -403,6 +405,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
                                          validation) <= kMaxFlightTiltRad;
     // One candidate: the current model plus `effect`, fitted on the training window and tested on the validation
     // window; or the reason it was not tried.
+    unsigned jacobian_threads = 1;  // set for each round of candidates
     const auto try_effect = [&](const Effect& effect) -> std::pair<CandidateTrial, std::optional<State>> {
       CandidateTrial trial;
       trial.effect = std::string(effect.name());
@@ -462,7 +465,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
             if (o.convergence.back() < lowest) lowest = o.convergence.back(), chosen_start = std::move(o.values);
           }
         }
-        FitOutcome best = fit(model, chosen_start, train);
+        FitOutcome best = fit(model, chosen_start, train, 50, FitStop::cost, jacobian_threads);
         if (auto why = judge_tilt ? unflyable(model, best.values, train, validation) : std::nullopt) {
           trial.skipped = *why;
           return {trial, std::nullopt};
@@ -536,8 +539,9 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
         }
       };
-      const std::size_t threads =
-          std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), untried.size());
+      const std::size_t threads = std::min<std::size_t>(cores(), untried.size());
+      // The cores the candidates leave idle (a step with fewer candidates than cores) share each fit's Jacobian.
+      jacobian_threads = static_cast<unsigned>(cores() / std::max<std::size_t>(threads, 1));
       std::vector<std::thread> pool;
       for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
       work();

@@ -12,7 +12,10 @@
 #include <string>
 #include <vector>
 
+#include "diagnose/effects/library.hpp"
+#include "diagnose/model.hpp"
 #include "diagnose/search.hpp"
+#include "diagnose/signals.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"
@@ -125,6 +128,37 @@ TEST(FromTheImuAlone, LinearDragAndATimeOffset) {
   const Diagnosis d = diagnose({.sim_effects = {"linear_drag=1", "quadratic_drag=0", "time_offset=0.01"}});
   expect_found_first(d, control("full"), "linear_drag");
   EXPECT_EQ(chosen(d), (std::vector<std::string>{"linear_drag", "time_offset"}));
+}
+
+// The filter error method's Jacobian is shared among threads, each column on a model of its own: the fit must not
+// depend on how many threads there are, to the last bit (same bytes and options, same estimates), and a column
+// written by the wrong thread or read before it is done would show here.
+TEST(FromTheImuAlone, TheFitDoesNotDependOnHowManyThreadsShareItsJacobian) {
+  const std::vector<std::string> drag{"linear_drag=1"};
+  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, 20.0, drag)));
+  series.reference.reset();
+  const Signals signals = prepare_signals(series);
+  DiagnoseOptions options;
+  const estimator::TimeWindow whole{0.0, 20.0};
+  options.train = whole;
+  options.validate = whole;
+  ModelSetup setup;
+  setup.base = ModelKind::full;
+  setup.signals = &signals;
+  use_filter(setup, signals, options);
+  const Model model(signals, setup, {find_effect("linear_drag")});
+  ASSERT_TRUE(model.filter_runs());
+  const Range train = range_of(signals, whole);
+  std::vector<double> start = model.base_start(train);
+  for (std::size_t i = start.size(); i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+  const FitOutcome one = fit(model, start, train, 6, FitStop::cost, 1);
+  for (unsigned threads : {2u, 3u}) {
+    const FitOutcome shared = fit(model, start, train, 6, FitStop::cost, threads);
+    EXPECT_EQ(shared.values, one.values) << threads << " threads";
+    EXPECT_EQ(shared.convergence, one.convergence) << threads << " threads";
+    EXPECT_EQ(shared.std_errors, one.std_errors) << threads << " threads";
+  }
+  EXPECT_LT(one.convergence.back(), one.convergence.front());  // it did fit
 }
 
 }  // namespace
