@@ -23,6 +23,7 @@ struct Endpoint {
   std::uint16_t port = 0;
   std::filesystem::path path;  // unix sockets
   std::string text;            // as written in the config, for messages
+  friend bool operator==(const Endpoint&, const Endpoint&) = default;
 };
 
 // Which device a link reads: a path, or a USB identity found again after the device re-enumerates.
@@ -90,11 +91,27 @@ struct MqttConfig {
   friend bool operator==(const MqttConfig&, const MqttConfig&) = default;
 };
 
+// [outputs.foxglove]: a Foxglove WebSocket server for Foxglove Studio (daemon/foxglove_output.hpp; channels and limits:
+// docs/outputs.md, "Foxglove"). On loopback unless configured otherwise.
+struct FoxgloveConfig {
+  Endpoint listen{.kind = Endpoint::Kind::tcp_listen,
+                  .host = "127.0.0.1",
+                  .port = 8765,
+                  .path = {},
+                  .text = "127.0.0.1:8765"};  // Foxglove Studio's default port
+  std::optional<double> sample_hz;            // per link, on the device clock; none: every sample; 0: no samples
+  std::optional<double> estimate_hz;          // likewise for estimates
+  std::size_t queue = 8192;                   // messages waiting for the server's thread; beyond it the oldest goes
+  std::size_t client_queue_bytes = 4u << 20;  // per client, waiting to be written; beyond it its messages are dropped
+  friend bool operator==(const FoxgloveConfig&, const FoxgloveConfig&) = default;
+};
+
 struct OutputsConfig {
-  std::optional<Endpoint> plotjuggler{};  // JSON per sample/estimate over UDP (PlotJuggler's default 127.0.0.1:9870)
-  std::vector<Endpoint> line_streams{};   // newline-delimited JSON to any subscriber (tcp-listen or unix)
-  std::uint32_t decimation = 1;           // publish every Nth sample (estimates likewise)
-  std::optional<MqttConfig> mqtt{};       // read at start: SIGHUP keeps the running connection
+  std::optional<Endpoint> plotjuggler{};     // JSON per sample/estimate over UDP (PlotJuggler's default 127.0.0.1:9870)
+  std::vector<Endpoint> line_streams{};      // newline-delimited JSON to any subscriber (tcp-listen or unix)
+  std::uint32_t decimation = 1;              // publish every Nth sample (estimates likewise)
+  std::optional<MqttConfig> mqtt{};          // read at start: SIGHUP keeps the running connection
+  std::optional<FoxgloveConfig> foxglove{};  // read at start: SIGHUP keeps the running server
 };
 
 // [sync]: the store copied into the fleet archive in PostgreSQL as it records (daemon/archive_sync.hpp). Like [mqtt],

@@ -291,12 +291,29 @@ MqttConfig read_mqtt(TomlTable& t) {
   return mqtt;
 }
 
+FoxgloveConfig read_foxglove(TomlTable& t) {
+  FoxgloveConfig foxglove;
+  if (auto listen = t.string("listen")) {
+    foxglove.listen = parse_endpoint_at(t, "listen", "tcp-listen://" + *listen);
+    foxglove.listen.text = *listen;
+  }
+  foxglove.sample_hz = t.number("sample_hz", 0, 100'000);
+  foxglove.estimate_hz = t.number("estimate_hz", 0, 100'000);
+  if (auto n = t.integer("queue", 16, 10'000'000)) foxglove.queue = static_cast<std::size_t>(*n);
+  if (auto kib = t.integer("client_queue_kib", 16, 1'048'576)) {
+    foxglove.client_queue_bytes = static_cast<std::size_t>(*kib) * 1024;
+  }
+  t.finish();
+  return foxglove;
+}
+
 OutputsConfig read_outputs(TomlTable& t) {
   OutputsConfig outputs;
   outputs.plotjuggler = read_endpoint(t, "plotjuggler");
   outputs.line_streams = read_endpoints(t, "line_streams");
   if (auto n = t.integer("decimation", 1, 1'000'000)) outputs.decimation = static_cast<std::uint32_t>(*n);
   if (auto mqtt = t.table("mqtt")) outputs.mqtt = read_mqtt(*mqtt);
+  if (auto foxglove = t.table("foxglove")) outputs.foxglove = read_foxglove(*foxglove);
   t.finish();
   return outputs;
 }
@@ -463,6 +480,14 @@ std::string to_toml(const Config& config) {
     if (m->password_env) mqtt.insert("password_env", *m->password_env);
     if (m->ca_file) mqtt.insert("ca_file", m->ca_file->string());
     outputs.insert("mqtt", std::move(mqtt));
+  }
+  if (const auto& f = config.outputs.foxglove) {
+    toml::table foxglove{{"listen", f->listen.text},
+                         {"queue", static_cast<std::int64_t>(f->queue)},
+                         {"client_queue_kib", static_cast<std::int64_t>(f->client_queue_bytes / 1024)}};
+    if (f->sample_hz) foxglove.insert("sample_hz", *f->sample_hz);
+    if (f->estimate_hz) foxglove.insert("estimate_hz", *f->estimate_hz);
+    outputs.insert("foxglove", std::move(foxglove));
   }
   root.insert("outputs", std::move(outputs));
   if (const auto& y = config.sync) {

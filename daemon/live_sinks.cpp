@@ -2,6 +2,7 @@
 
 #include <utility>
 
+#include "daemon/foxglove_output.hpp"
 #include "daemon/mqtt_output.hpp"
 
 namespace imubridge::daemon {
@@ -42,6 +43,9 @@ std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(const LiveCo
     if (link.feedback) sinks.push_back(std::make_unique<FeedbackSink>(i, *link.feedback, link.write));
   }
   if (context.config.mqtt) sinks.push_back(std::make_unique<MqttSink>(*context.config.mqtt, links, context));
+  if (context.config.foxglove) {
+    sinks.push_back(std::make_unique<FoxgloveSink>(*context.config.foxglove, links, context));
+  }
   sinks.push_back(std::make_unique<OutputsSink>(context.outputs, std::move(names)));
   return sinks;
 }

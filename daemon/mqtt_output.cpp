@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "daemon/daemon_internal.hpp"
 #include "daemon/live_sinks.hpp"
 #include "daemon/outputs.hpp"
 
@@ -29,34 +30,6 @@ constexpr auto kReportInterval = 5s;
 constexpr auto kFlushLimit = 1s;
 // The connection thread's longest wait for the socket; also how long stopping may wait for it.
 constexpr auto kLoopTimeout = 500ms;
-
-std::int64_t wall_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-std::int64_t mono_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
-// A rate cap as a period of device time: 0 for every message, -1 for none.
-std::int64_t period_us(std::optional<double> hz) {
-  if (!hz) return 0;
-  if (*hz <= 0) return -1;
-  return std::max<std::int64_t>(1, std::llround(1e6 / *hz));
-}
-
-// Whether a message at device time `t_us` goes out under the cap `period`, and when the next may. The slots keep to
-// a grid of the period, so a cap that divides the sample rate takes exactly every Nth sample; a clock that went back
-// (a device restart) starts the grid again.
-bool take(std::optional<std::int64_t>& next_due_us, std::int64_t t_us, std::int64_t period) {
-  if (period == 0) return true;
-  if (period < 0) return false;
-  if (next_due_us && t_us < *next_due_us && t_us >= *next_due_us - period) return false;
-  const bool on_grid = next_due_us && t_us >= *next_due_us && t_us < *next_due_us + period;
-  next_due_us = (on_grid ? *next_due_us : t_us) + period;
-  return true;
-}
 
 void check(int rc, const std::string& what) {
   if (rc != MOSQ_ERR_SUCCESS) throw std::invalid_argument(what + ": " + mosquitto_strerror(rc));
@@ -88,27 +61,26 @@ std::optional<std::string> read_mqtt_password(const MqttConfig& config) {
 
 MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links, const LiveContext& context)
     : config_(config),
-      sample_period_us_(period_us(config.sample_hz)),
-      estimate_period_us_(period_us(config.estimate_hz)),
+      feed_(links, config.sample_hz, config.estimate_hz,
+            [this](std::size_t link, Topic topic, std::string payload, std::int64_t) {
+              enqueue(link, topic, std::move(payload));
+            }),
       io_(context.io),
       outputs_(context.outputs),
       record_event_(context.record_event),
       report_timer_(context.io) {
-  for (const LiveLink& link : links) {
-    link_names_.push_back(link.name);
-    counts_gaps_.push_back(link.format != protocol::WireFormat::mavlink);
-  }
-  dropped_unreported_.assign(link_names_.size(), 0);
-  drops_to_publish_.assign(link_names_.size(), 0);
+  const std::vector<std::string>& link_names = feed_.link_names();
+  dropped_unreported_.assign(link_names.size(), 0);
+  drops_to_publish_.assign(link_names.size(), 0);
   const std::string root = "imubridge/" + config_.station + "/";
-  for (const std::string& link : link_names_) {
+  for (const std::string& link : link_names) {
     topics_.push_back({root + link + "/sample", root + link + "/estimate", root + link + "/event"});
   }
   status_topic_ = root + "status";
   offline_payload_ = nlohmann::json{{"state", "offline"}, {"station", config_.station}}.dump();
   online_payload_ = nlohmann::json{{"state", "online"},
                                    {"station", config_.station},
-                                   {"links", link_names_},
+                                   {"links", link_names},
                                    {"software_version", IMUBRIDGE_VERSION},
                                    {"pid", static_cast<std::int64_t>(::getpid())}}
                         .dump();
@@ -175,10 +147,10 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
   schedule_report();
   spdlog::info("mqtt: publishing to {} as station '{}' (samples {}, estimates {}, QoS {})", config_.url,
                config_.station,
-               sample_period_us_ < 0 ? std::string("off") : fmt::format("at most {} Hz per link", config_.sample_hz),
-               estimate_period_us_ < 0    ? std::string("off")
-               : estimate_period_us_ == 0 ? std::string("all")
-                                          : fmt::format("at most {} Hz per link", *config_.estimate_hz),
+               config_.sample_hz <= 0 ? std::string("off") : fmt::format("at most {} Hz per link", config_.sample_hz),
+               !config_.estimate_hz        ? std::string("all")
+               : *config_.estimate_hz <= 0 ? std::string("off")
+                                           : fmt::format("at most {} Hz per link", *config_.estimate_hz),
                config_.qos);
 }
 
@@ -267,59 +239,10 @@ void MqttSink::on_error(const char* text) {
   });
 }
 
-MqttSink::Stream& MqttSink::stream_of(std::size_t link, const protocol::Sample& sample) {
-  for (Stream& stream : streams_) {
-    if (stream.link == link && stream.link_id == sample.link_id) return stream;
-  }
-  return streams_.emplace_back(Stream{.link = link,
-                                      .link_id = sample.link_id,
-                                      .last_seq = sample.seq,
-                                      .clock_epoch = sample.clock_epoch,
-                                      .next_sample_us = std::nullopt,
-                                      .next_estimate_us = std::nullopt});
-}
-
 void MqttSink::on_sample(std::size_t link, const protocol::Sample& sample, std::span<const store::Estimate> estimates,
                          std::int64_t recv_mono_ns) {
   try {
-    // The chunk's arrival on the wall clock, so a subscriber elsewhere can tell the end-to-end latency. The two
-    // clocks' difference is taken again each second: taken at every sample, the nanoseconds between the two readings
-    // would make samples of one chunk differ and later ones seem to arrive earlier.
-    if (!wall_minus_mono_ns_ || recv_mono_ns - wall_minus_mono_at_ns_ >= 1'000'000'000) {
-      wall_minus_mono_ns_ = wall_now_ns() - mono_now_ns();
-      wall_minus_mono_at_ns_ = recv_mono_ns;
-    }
-    const std::int64_t recv_wall_ns = recv_mono_ns + *wall_minus_mono_ns_;
-    Stream& stream = stream_of(link, sample);
-    if (sample.clock_epoch != stream.clock_epoch) {
-      publish_event(link, "device_restart", 1, "the device's sequence number and clock went back",
-                    sample.device_time_us, recv_wall_ns);
-      stream.next_sample_us.reset();
-      stream.next_estimate_us.reset();
-    } else if (counts_gaps_[link] && sample.seq > stream.last_seq + 1) {
-      publish_event(link, "sequence_gap", static_cast<std::int64_t>(sample.seq - stream.last_seq - 1),
-                    "samples lost before reaching the ground station", sample.device_time_us, recv_wall_ns);
-    }
-    stream.clock_epoch = sample.clock_epoch;
-    stream.last_seq = sample.seq;
-
-    const std::string_view name = link_names_.at(link);
-    const auto message = [&](const store::Estimate* estimate) {
-      std::string json = "{";
-      append_line_members(json, name, sample, estimate);
-      json += ",\"recv_wall_ns\":";
-      json += std::to_string(recv_wall_ns);
-      json += '}';
-      return json;
-    };
-    if (take(stream.next_sample_us, sample.device_time_us, sample_period_us_)) {
-      enqueue(link, Topic::sample, message(nullptr));
-    }
-    for (const store::Estimate& estimate : estimates) {
-      if (take(stream.next_estimate_us, sample.device_time_us, estimate_period_us_)) {
-        enqueue(link, Topic::estimate, message(&estimate));
-      }
-    }
+    feed_.on_sample(link, sample, estimates, recv_mono_ns);
   } catch (const std::exception& e) {  // out of memory: this output misses a sample, the recording goes on
     spdlog::error("mqtt: {}", e.what());
   }
@@ -327,14 +250,7 @@ void MqttSink::on_sample(std::size_t link, const protocol::Sample& sample, std::
 
 void MqttSink::publish_event(std::size_t link, const std::string& kind, std::int64_t count, const std::string& detail,
                              std::optional<std::int64_t> device_time_us, std::int64_t wall_ns, bool evicts) {
-  nlohmann::json event;
-  if (device_time_us) event["timestamp"] = static_cast<double>(*device_time_us) / 1e6;
-  event["link"] = link_names_.at(link);
-  event["kind"] = kind;
-  event["count"] = count;
-  event["detail"] = detail;
-  event["wall_ns"] = wall_ns;
-  enqueue(link, Topic::event, event.dump(), evicts);
+  enqueue(link, Topic::event, feed_.event_payload(link, kind, count, detail, device_time_us, wall_ns), evicts);
 }
 
 void MqttSink::enqueue(std::size_t link, Topic topic, std::string payload, bool evicts) {
@@ -444,7 +360,7 @@ void MqttSink::schedule_report() {
 // Drops since the last report: logged and recorded as session events at once, and published on each link's event
 // topic once connected (while the broker is away they would only push more of the outbox out).
 void MqttSink::report() {
-  std::vector<std::uint64_t> dropped(link_names_.size(), 0);
+  std::vector<std::uint64_t> dropped(feed_.link_names().size(), 0);
   std::uint64_t lost = 0, dropped_total = 0, lost_total = 0;
   bool connected = false;
   {

@@ -24,6 +24,7 @@
 
 #include "daemon/asio.hpp"
 #include "daemon/config.hpp"
+#include "daemon/telemetry_feed.hpp"
 #include "pipeline/session_engine.hpp"
 
 struct mosquitto;
@@ -55,22 +56,13 @@ class MqttSink final : public pipeline::SessionSink {
   nlohmann::json counters() const;
 
  private:
-  enum class Topic : std::uint8_t { sample, estimate, event };
+  using Topic = TelemetryFeed::Kind;
   struct Message {
     std::uint32_t link;
     Topic topic;
     std::string payload;
   };
-  // One stream of samples: a link, or one radio of an XBee link. Decimation and gaps are per stream.
-  struct Stream {
-    std::size_t link;
-    protocol::LinkId link_id;
-    std::uint64_t last_seq;
-    std::uint32_t clock_epoch;
-    std::optional<std::int64_t> next_sample_us, next_estimate_us;  // device time the next one may go at
-  };
 
-  Stream& stream_of(std::size_t link, const protocol::Sample& sample);
   void publish_event(std::size_t link, const std::string& kind, std::int64_t count, const std::string& detail,
                      std::optional<std::int64_t> device_time_us, std::int64_t wall_ns, bool evicts = true);
   // Appends to the outbox, dropping the oldest beyond its bound. A report of drops (`evicts` false) goes in over
@@ -87,19 +79,12 @@ class MqttSink final : public pipeline::SessionSink {
   void on_publish(int mid);
 
   MqttConfig config_;
-  std::vector<std::string> link_names_;
-  // By link: whether a jump of the sequence number means samples were lost. Not on MAVLink, whose sequence numbers
-  // count every message of the sender.
-  std::vector<bool> counts_gaps_;
-  std::vector<std::array<std::string, 3>> topics_;  // by link and Topic
+  TelemetryFeed feed_;                                                  // daemon thread only
+  std::vector<std::array<std::string, TelemetryFeed::kKinds>> topics_;  // by link and Topic
   std::string status_topic_, online_payload_, offline_payload_;
-  std::int64_t sample_period_us_ = 0, estimate_period_us_ = 0;  // 0: every one; -1: none
-  std::vector<Stream> streams_;                                 // daemon thread only
-  std::vector<std::uint64_t> drops_to_publish_;                 // by link; daemon thread only
-  std::optional<std::int64_t> wall_minus_mono_ns_;              // the wall clock less the monotonic one
-  std::int64_t wall_minus_mono_at_ns_ = 0;                      // when (monotonic) it was taken
-  std::string last_error_logged_;                               // libmosquitto's last error message; daemon thread only
-  boost::asio::io_context& io_;  // the daemon's: logs, events and the report timer happen on its thread
+  std::vector<std::uint64_t> drops_to_publish_;  // by link; daemon thread only
+  std::string last_error_logged_;                // libmosquitto's last error message; daemon thread only
+  boost::asio::io_context& io_;                  // the daemon's: logs, events and the report timer happen on its thread
   Outputs& outputs_;
   std::function<void(std::optional<std::size_t>, std::string, std::string, std::int64_t)> record_event_;
   boost::asio::steady_timer report_timer_;

@@ -117,7 +117,8 @@ void append_line_members(std::string& out, std::string_view link, const protocol
   append_measurement(out, sample, estimate_or_null);
 }
 
-Outputs::Outputs(boost::asio::io_context& io, const OutputsConfig& config) : io_(io), mqtt_(config.mqtt) {
+Outputs::Outputs(boost::asio::io_context& io, const OutputsConfig& config)
+    : io_(io), mqtt_(config.mqtt), foxglove_(config.foxglove) {
   reconfigure(config);
 }
 
@@ -163,6 +164,9 @@ void Outputs::reconfigure(const OutputsConfig& config) {
   decimation_ = config.decimation;
   if (config.mqtt != mqtt_) {
     spdlog::warn("SIGHUP: [outputs.mqtt] changed; MQTT goes on as started until the daemon is restarted");
+  }
+  if (config.foxglove != foxglove_) {
+    spdlog::warn("SIGHUP: [outputs.foxglove] changed; the server goes on as started until the daemon is restarted");
   }
 }
 

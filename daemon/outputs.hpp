@@ -68,6 +68,7 @@ class Outputs {
   std::uint64_t samples_published_ = 0;
   std::map<std::string, std::function<nlohmann::json()>, std::less<>> other_counters_;
   std::optional<MqttConfig> mqtt_;  // as started: its sink (daemon/mqtt_output.hpp) keeps it until the next start
+  std::optional<FoxgloveConfig> foxglove_;  // likewise (daemon/foxglove_output.hpp)
 };
 
 }  // namespace imubridge::daemon

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "store/store.hpp"
+#include "tests/npm_packages.hpp"
 #include "tests/paper_params.hpp"
 #include "tests/run_command.hpp"
 #include "tests/temp_dir.hpp"
@@ -22,34 +23,12 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// The reader's version is pinned: the same test reads the same way on every machine.
-constexpr const char* kMcapCore = "@mcap/core@2.2.2";
-
-// Installs @mcap/core under the build directory once (flock: ctest runs this file's tests in parallel). node and npm
-// are part of the machine (scripts/setup): without them this fails, it does not skip.
-std::string install_reader() {
-  const fs::path dir = IMUBRIDGE_NPM_DIR;
-  if (fs::exists(dir / "node_modules/@mcap/core/package.json")) return {};
-  fs::create_directories(dir);
-  if (std::system("command -v node >/dev/null && command -v npm >/dev/null") != 0) {
-    return "node and npm are needed to read MCAP back with @mcap/core (scripts/setup installs them)";
-  }
-  const std::string command = "flock " + (dir / ".install.lock").string() + " npm install --no-save --no-audit " +
-                              "--no-fund --loglevel=error --prefix " + dir.string() + " " + kMcapCore + " >" +
-                              (dir / "install.log").string() + " 2>&1";
-  if (std::system(command.c_str()) != 0 || !fs::exists(dir / "node_modules/@mcap/core/package.json")) {
-    return "npm install " + std::string(kMcapCore) + " failed: see " + (dir / "install.log").string();
-  }
-  return {};
-}
-
 // What tests/mcap_read.cjs prints for `file`, each message's text parsed here into "data" (exact 64-bit integers).
 json read_with_mcap_core(const fs::path& file) {
   const fs::path out = file.string() + ".read.json";
   const fs::path err = file.string() + ".read.err";
-  const std::string command = "NODE_PATH=" + (fs::path(IMUBRIDGE_NPM_DIR) / "node_modules").string() + " node " +
-                              IMUBRIDGE_SOURCE_DIR "/tests/mcap_read.cjs " + file.string() + " >" + out.string() +
-                              " 2>" + err.string();
+  const std::string command = "NODE_PATH=" + npm_node_path() + " node " + IMUBRIDGE_SOURCE_DIR "/tests/mcap_read.cjs " +
+                              file.string() + " >" + out.string() + " 2>" + err.string();
   const int status = std::system(command.c_str());
   if (status != 0) throw std::runtime_error("mcap_read.cjs failed: " + slurp(err));
   json read = json::parse(slurp(out));
@@ -63,7 +42,7 @@ bool same(const json& j, double v) { return std::isnan(v) ? j.is_null() : (j.is_
 
 class McapExport : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() { install_error_ = install_reader(); }
+  static void SetUpTestSuite() { install_error_ = install_npm_packages(); }
   void SetUp() override { ASSERT_EQ(install_error_, "") << install_error_; }
 
   // A simulated flight with its truth as reference, and a replay run with the paper's parameters for estimates.

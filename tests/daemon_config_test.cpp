@@ -259,6 +259,38 @@ TEST(ConfigFile, SyncNamesTheArchiveButNeverItsPassword) {
             std::string::npos);
 }
 
+TEST(ConfigFile, FoxgloveServesLoopbackUnlessTheAddressIsGiven) {
+  const Config defaults = parse_config("[outputs.foxglove]\n", "test.toml");
+  ASSERT_TRUE(defaults.outputs.foxglove);
+  EXPECT_EQ(defaults.outputs.foxglove->listen.host, "127.0.0.1");
+  EXPECT_EQ(defaults.outputs.foxglove->listen.port, 8765);
+  EXPECT_FALSE(parse_config("", "test.toml").outputs.foxglove);
+  const Config c = parse_config(
+      "[outputs.foxglove]\nlisten = \"[::]:9000\"\nsample_hz = 50\nestimate_hz = 0\nqueue = 100\n"
+      "client_queue_kib = 256\n",
+      "test.toml");
+  ASSERT_TRUE(c.outputs.foxglove);
+  EXPECT_EQ(c.outputs.foxglove->listen.host, "::");
+  EXPECT_EQ(c.outputs.foxglove->listen.port, 9000);
+  EXPECT_EQ(c.outputs.foxglove->sample_hz, 50);
+  EXPECT_EQ(c.outputs.foxglove->estimate_hz, 0);
+  EXPECT_EQ(c.outputs.foxglove->queue, 100u);
+  EXPECT_EQ(c.outputs.foxglove->client_queue_bytes, 256u * 1024);
+  EXPECT_EQ(parse_config(to_toml(c), "snapshot").outputs.foxglove, c.outputs.foxglove);
+  EXPECT_EQ(parse_config("[outputs.foxglove]\nlisten = \"localhost:1\"\n", "t").outputs.foxglove->listen.host,
+            "127.0.0.1");
+  for (const char* bad : {"listen = \"ws://0.0.0.0:8765\"", "listen = \"station:8765\"", "listen = \"0.0.0.0\"",
+                          "sample_hz = -1", "queue = 1", "client_queue_kib = 1", "listen = 8765"}) {
+    const std::string key = std::string(bad).substr(0, std::string(bad).find(' '));
+    EXPECT_NE(
+        error_of(std::string("[outputs.foxglove]\n") + bad + "\n").find("test.toml:2: 'outputs.foxglove." + key + "'"),
+        std::string::npos)
+        << bad << ": " << error_of(std::string("[outputs.foxglove]\n") + bad + "\n");
+  }
+  EXPECT_NE(error_of("[outputs.foxglove]\nlistn = \"127.0.0.1:1\"\n").find("'outputs.foxglove.listn'"),
+            std::string::npos);
+}
+
 TEST(ConfigFile, AFileWithoutLinksIsValidUntilNothingAddsAny) {
   Config c = parse_config("[store]\npath = \"x.db\"\n", "test.toml");
   EXPECT_THROW(validate(c, "test.toml"), std::invalid_argument);
