@@ -28,6 +28,29 @@ struct Header {
   std::size_t frame_size() const { return size + len + kCrcSize + (is_signed() ? kSignatureSize : 0); }
 };
 
+// What decoding asks of every frame's id: its spec (judge) and its clock and whether it has typed fields (take).
+struct IdFacts {
+  const MessageSpec* spec = nullptr;
+  std::optional<ClockField> clock;
+  bool decoded = false;
+
+  static IdFacts of(std::uint32_t msgid) { return {message_spec(msgid), clock_field(msgid), is_decoded(msgid)}; }
+};
+
+// For the ids of MAVLink 1's range, where a link's IMU, attitude and position messages are, the facts are gathered
+// once: a frame costs one look-up instead of three searches, which took about a tenth of the decoder's instructions.
+// Other ids ask each time. Inline, so that a frame's look-up copies only the facts it reads.
+inline IdFacts id_facts(std::uint32_t msgid) {
+  static const std::array<IdFacts, 256> kLowIds = [] {
+    std::array<IdFacts, 256> facts;
+    for (std::uint32_t id = 0; id < facts.size(); ++id) facts[id] = IdFacts::of(id);
+    return facts;
+  }();
+  if (msgid < kLowIds.size()) [[likely]]
+    return kLowIds[msgid];
+  return IdFacts::of(msgid);
+}
+
 // Fills `m` from a frame that passed judge().
 void read_message(const std::uint8_t* frame, const Header& h, Message& m) {
   m.version = h.version;
@@ -169,7 +192,7 @@ inline Judgement Decoder::Framing::judge(std::span<const std::uint8_t> c, bool /
   if (c.size() < (c[0] == kStxV1 ? kHeaderSizeV1 : kHeaderSizeV2)) return {Verdict::need_more};
   const Header h = Header::read(c.data());
   if (h.incompat_flags & ~kIncompatSigned) return {Verdict::false_start};  // a feature we cannot parse
-  const MessageSpec* spec = message_spec(h.msgid);
+  const MessageSpec* spec = id_facts(h.msgid).spec;
   if (!spec) return {Verdict::unverified};  // without its CRC_EXTRA no CRC can be checked
   const FrameCheck check = check_known(c, h, *spec);
   switch (check.status) {
@@ -192,7 +215,8 @@ inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<
   const Header h = Header::read(f.data());
   Message& m = out.emplace_back();
   read_message(f.data(), h, m);
-  const std::optional<ClockField> clock = clock_field(h.msgid);
+  const IdFacts facts = id_facts(h.msgid);
+  const std::optional<ClockField>& clock = facts.clock;
   const std::optional<std::uint64_t> time = clock ? std::optional(read_clock(m.payload.data(), *clock)) : std::nullopt;
   // Each component numbers its own frames, mod 256.
   const auto id = static_cast<std::uint16_t>(h.sysid << 8 | h.compid);
@@ -220,7 +244,7 @@ inline bool Decoder::Framing::take(std::span<const std::uint8_t> f, std::vector<
     components[last_found].last_time_us[clock->slot] = *time;
     components[last_found].has_time[clock->slot] = true;
   }
-  if (!is_decoded(h.msgid)) ++counters.unsupported;
+  if (!facts.decoded) ++counters.unsupported;
   m.clock_epoch = clock_epoch;
   return true;
 }

@@ -138,12 +138,6 @@ std::optional<ClockField> clock_field(std::uint32_t msgid) {
   return std::nullopt;
 }
 
-std::uint64_t read_clock(const std::uint8_t* payload, const ClockField& field) {
-  const std::uint64_t ticks = field.size == 8 ? load_le<std::uint64_t>(payload + field.offset)
-                                              : std::uint64_t{load_le<std::uint32_t>(payload + field.offset)};
-  return ticks * field.to_us;
-}
-
 std::optional<Decoded> decode_payload(std::uint32_t msgid, std::span<const std::uint8_t> payload) {
   return read_any(msgid, payload, std::type_identity<Decoded>{});
 }

@@ -10,6 +10,8 @@
 #include <variant>
 #include <vector>
 
+#include "protocol/byte_order.hpp"
+
 namespace imubridge::protocol::mavlink {
 
 // What a message's XML definition tells a receiver checking its frames: the CRC_EXTRA that ends its CRC, and its
@@ -188,8 +190,13 @@ struct ClockField {
 inline constexpr std::size_t kClockSlots = std::variant_size_v<Decoded>;
 // nullopt for an id without a clock, decoded or not.
 std::optional<ClockField> clock_field(std::uint32_t msgid);
-// The clock in microseconds, from a payload zero-filled beyond what was received (as Message's is).
-std::uint64_t read_clock(const std::uint8_t* payload, const ClockField& field);
+// The clock in microseconds, from a payload zero-filled beyond what was received (as Message's is). Inline: the
+// decoder reads one for most frames.
+inline std::uint64_t read_clock(const std::uint8_t* payload, const ClockField& field) {
+  const std::uint64_t ticks = field.size == 8 ? load_le<std::uint64_t>(payload + field.offset)
+                                              : std::uint64_t{load_le<std::uint32_t>(payload + field.offset)};
+  return ticks * field.to_us;
+}
 
 // The typed fields of a payload as received; bytes missing at the end (MAVLink 2 truncation) read as zero.
 std::optional<Decoded> decode_payload(std::uint32_t msgid, std::span<const std::uint8_t> payload);

@@ -39,6 +39,9 @@ class StartFinder {
   StartFinder(const std::uint8_t* begin, const std::uint8_t* end) : end_(end), hits_{find(begin, kStarts)...} {}
 
   const std::uint8_t* next(const std::uint8_t* from) {
+    // In a stream of frames the next one starts where the last one ended: no search then. (The hits kept stay right,
+    // each being the first of its value at or after an earlier position.)
+    if (from != end_ && ((*from == kStarts) || ...)) return from;
     const std::uint8_t* nearest = end_;
     for (std::size_t i = 0; i < hits_.size(); ++i) {
       if (hits_[i] < from) hits_[i] = find(from, kValues[i]);
