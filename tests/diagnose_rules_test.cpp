@@ -93,7 +93,9 @@ TEST(DiagnoseRules, EveryCandidateIsJudgedByTheVelocityWithAReference) {
   DiagnoseOptions without = options(VelocitySource::reference, 2);
   without.judge_by_flight = false;
   const Diagnosis plain = run_diagnosis(paper_flight(), without);
-  if (refused_by_velocity > 0) EXPECT_GT(plain.steps.size(), d.steps.size());
+  if (refused_by_velocity > 0) {
+    EXPECT_GT(plain.steps.size(), d.steps.size());
+  }
 }
 
 TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood) {
@@ -107,7 +109,9 @@ TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood)
     if (!c.skipped.empty()) continue;
     EXPECT_TRUE(c.likelihood_validation) << c.effect;
     // A candidate that passes the residual's rules but lowers the likelihood is refused by the likelihood rule.
-    if (c.rejected_by.rfind("likelihood rule", 0) == 0) EXPECT_LE(*c.likelihood_validation, d.base.likelihood->validation);
+    if (c.rejected_by.rfind("likelihood rule", 0) == 0) {
+      EXPECT_LE(*c.likelihood_validation, d.base.likelihood->validation);
+    }
   }
 }
 
