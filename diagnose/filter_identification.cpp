@@ -5,7 +5,6 @@
 #include <span>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "diagnose/effects/library.hpp"
@@ -106,8 +105,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
     }
   }
   if (!drag.empty()) model.scan_drag_start(start, drag, train);
-  const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::parameter_precision,
-                                       std::max(1u, std::thread::hardware_concurrency()));
+  const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::parameter_precision, cores());
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 
   estimator::IdentifyResult result;

@@ -4,8 +4,8 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <cmath>
 #include <atomic>
+#include <cmath>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -581,7 +581,8 @@ class ForwardDifferenceCost final : public ceres::CostFunction {
         }
         shifted[j] = x[j];
         const double one_over_step = 1.0 / step;
-        for (std::size_t i = 0; i < residuals_; ++i) jacobian[i * parameters_ + j] = (column[i] - residuals[i]) * one_over_step;
+        for (std::size_t i = 0; i < residuals_; ++i)
+          jacobian[i * parameters_ + j] = (column[i] - residuals[i]) * one_over_step;
       }
     };
     std::vector<std::thread> helpers;
@@ -612,6 +613,8 @@ class RecordCost final : public ceres::IterationCallback {
 
 }  // namespace
 
+unsigned cores() { return std::max(1u, std::thread::hardware_concurrency()); }
+
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations, FitStop stop,
                unsigned jacobian_threads) {
   const std::vector<Parameter>& params = model.parameters();
@@ -628,11 +631,10 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
   // Central differences, except where every evaluation runs the filter over the flight: forward ones there halve
   // the cost, and the filter's output is smooth in the parameters, so their first-order error stays far below the
   // step LM takes.
-  ceres::CostFunction* cost =
-      model.filter_runs()
-          ? static_cast<ceres::CostFunction*>(
-                new ForwardDifferenceCost(model, range, params.size(), residual_count, jacobian_threads))
-          : central_difference_cost(model, range, params.size(), residual_count);
+  ceres::CostFunction* cost = model.filter_runs()
+                                  ? static_cast<ceres::CostFunction*>(new ForwardDifferenceCost(
+                                        model, range, params.size(), residual_count, jacobian_threads))
+                                  : central_difference_cost(model, range, params.size(), residual_count);
   problem.AddResidualBlock(cost, nullptr, x);
   std::vector<int> held;
   for (std::size_t i = 0; i < params.size(); ++i) {

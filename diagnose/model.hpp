@@ -122,6 +122,9 @@ struct FitOutcome {
 // (estimator/precise_solve.hpp), which is all a fit that reports parameters can tell (identify).
 enum class FitStop { cost, parameter_precision };
 
+// The cores fits may spread over (never 0).
+unsigned cores();
+
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
 // ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does. When the model
 // runs the filter, its Jacobian's columns are shared among `jacobian_threads` threads; the result does not depend on

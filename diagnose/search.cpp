@@ -26,8 +26,6 @@
 namespace imubridge::diagnose {
 namespace {
 
-unsigned cores() { return std::max(1u, std::thread::hardware_concurrency()); }
-
 // Residuals that follow a manoeuvre stay correlated for about as long as it lasts, around a second: the effective
 // sample count looks that far.
 constexpr double kCorrelationSpanS = 1.0;

@@ -1,5 +1,7 @@
 // A diagnosed model as the live estimator runs it (diagnose/live_model.hpp): each effect's live form is its own
 // (Effect::live_path, Effect::to_live), and the PARAMS.json reader knows exactly the library's effects.
+#include "diagnose/live_model.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 #include <vector>
 
 #include "diagnose/effects/library.hpp"
-#include "diagnose/live_model.hpp"
 #include "diagnose/model.hpp"
 #include "diagnose/signals.hpp"
 #include "estimator/constants.hpp"
@@ -87,9 +88,9 @@ TEST(LiveModel, EachEffectPutsItsValuesWhereItsLiveFormSays) {
   EXPECT_NEAR(f.wind_heading, 0.6, 1e-9);
   EXPECT_EQ(live.effects.size(), effects.size());
 
-  for (const char* path : {"full.drag_linear.0", "full.drag_quadratic.1", "full.accel_bias.0", "full.gyro_bias.0",
-                           "full.time_offset", "full.accel_scale.0", "full.accel_cross.01", "full.wind.0",
-                           "full.wind.1"}) {
+  for (const char* path :
+       {"full.drag_linear.0", "full.drag_quadratic.1", "full.accel_bias.0", "full.gyro_bias.0", "full.time_offset",
+        "full.accel_scale.0", "full.accel_cross.01", "full.wind.0", "full.wind.1"}) {
     EXPECT_NE(std::find(paths.begin(), paths.end(), path), paths.end()) << path;
     EXPECT_EQ(live.identification.std_errors.count(path), 1u) << path;
   }
@@ -117,7 +118,7 @@ TEST(LiveModel, AnAccelerometerBiasGoesLiveInImuAxes) {
   setup.signals = &signals;
   const Model model(signals, setup, {find_effect("accel_bias")});
   std::vector<double> p(model.parameters().size(), 0.0);
-  p[5] = std::numbers::pi / 2;  // mounted turned 90 degrees about z
+  p[5] = std::numbers::pi / 2;      // mounted turned 90 degrees about z
   p[model.effect_offset(0)] = 0.3;  // body x
   const estimator::ModelParams live = live_params(model, p);
   const Eigen::Vector3d imu_bias = rotation_matrix(live.full.mounting).transpose() * Eigen::Vector3d(0.3, 0.0, 0.0);

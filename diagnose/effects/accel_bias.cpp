@@ -22,12 +22,12 @@ class AccelBias final : public Effect {
       for (double& value : prediction[i]) value += p[i];
     }
   }
-  std::string live_path(const Parameter& p) const override { return "full.accel_bias." + std::to_string(axis_of(p)); }
+  std::string live_path(const Parameter& p) const override { return per_axis_live_path("accel_bias", p); }
   // Fitted in the residual's frame (the full base's body axes): the live estimator's bias is in IMU axes.
   void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext& context,
                estimator::FullModelParams& live) const override {
     Eigen::Vector3d body = Eigen::Vector3d::Zero();
-    for (std::size_t i = 0; i < p.size(); ++i) body[axis_of(p[i])] = v[i];
+    add_per_axis(v, p, body);
     live.accel_bias += context.imu_to_body.transpose() * body;
   }
 };

@@ -26,10 +26,10 @@ class AccelScale final : public Effect {
       for (Eigen::Vector3d& f : predicted) f[sensor] *= 1.0 + p[i];
     }
   }
-  std::string live_path(const Parameter& p) const override { return "full.accel_scale." + std::to_string(axis_of(p)); }
+  std::string live_path(const Parameter& p) const override { return per_axis_live_path("accel_scale", p); }
   void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
                estimator::FullModelParams& live) const override {
-    for (std::size_t i = 0; i < p.size(); ++i) live.accel_scale[axis_of(p[i])] = v[i];
+    add_per_axis(v, p, live.accel_scale);
   }
 };
 

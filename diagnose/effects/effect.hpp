@@ -17,6 +17,7 @@
 #include <limits>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -178,7 +179,20 @@ class Effect {
 // "x", "y" or "z".
 inline std::string axis_name(int axis) { return std::string(1, static_cast<char>('x' + axis)); }
 // The axis a per-axis parameter's name ends with: "k.x" -> 0, "bias.z" -> 2.
-inline int axis_of(const Parameter& p) { return p.name.empty() ? -1 : p.name.back() - 'x'; }
+inline int axis_of(const Parameter& p) {
+  const char last = p.name.empty() ? '?' : p.name.back();
+  if (last < 'x' || last > 'z') throw std::logic_error("diagnose: parameter " + p.name + " names no axis");
+  return last - 'x';
+}
+// The live form of an effect with one parameter per axis (Effect::live_path, Effect::to_live): kept in PARAMS.json
+// at "full.BLOCK.AXIS", its values added to the estimator's `field` at their axes.
+inline std::string per_axis_live_path(std::string_view block, const Parameter& p) {
+  return "full." + std::string(block) + "." + std::to_string(axis_of(p));
+}
+template <typename Field>
+void add_per_axis(std::span<const double> values, std::span<const Parameter> parameters, Field& field) {
+  for (std::size_t i = 0; i < parameters.size(); ++i) field[axis_of(parameters[i])] += values[i];
+}
 
 // One parameter per diagnosed axis: "<prefix>.x", "<prefix>.y".
 inline std::vector<Parameter> per_axis(const ModelSetup& setup, const std::string& prefix, const std::string& unit,

@@ -49,10 +49,10 @@ class GyroBias final : public Effect {
       for (std::size_t i = 0; i < axes.size(); ++i) w[axes[i]] -= p[i];
     }
   }
-  std::string live_path(const Parameter& p) const override { return "full.gyro_bias." + std::to_string(axis_of(p)); }
+  std::string live_path(const Parameter& p) const override { return per_axis_live_path("gyro_bias", p); }
   void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
                estimator::FullModelParams& live) const override {
-    for (std::size_t i = 0; i < p.size(); ++i) live.gyro_bias[axis_of(p[i])] = v[i];
+    add_per_axis(v, p, live.gyro_bias);
   }
 };
 

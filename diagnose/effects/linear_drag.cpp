@@ -14,10 +14,10 @@ class LinearDrag final : public Effect {
   void add_drag(std::span<const double> p, const ModelSetup& setup, DragLaw& law) const override {
     for (std::size_t i = 0; i < setup.axes.size(); ++i) law.k[setup.axes[i]] += p[i];
   }
-  std::string live_path(const Parameter& p) const override { return "full.drag_linear." + std::to_string(axis_of(p)); }
+  std::string live_path(const Parameter& p) const override { return per_axis_live_path("drag_linear", p); }
   void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
                estimator::FullModelParams& live) const override {
-    for (std::size_t i = 0; i < p.size(); ++i) live.drag_linear[axis_of(p[i])] += v[i];
+    add_per_axis(v, p, live.drag_linear);
   }
 };
 

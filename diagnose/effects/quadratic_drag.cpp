@@ -19,10 +19,10 @@ class QuadraticDrag final : public Effect {
   void add_drag(std::span<const double> p, const ModelSetup& setup, DragLaw& law) const override {
     for (std::size_t i = 0; i < setup.axes.size(); ++i) law.mu[setup.axes[i]] += p[i];
   }
-  std::string live_path(const Parameter& p) const override { return "full.drag_quadratic." + std::to_string(axis_of(p)); }
+  std::string live_path(const Parameter& p) const override { return per_axis_live_path("drag_quadratic", p); }
   void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
                estimator::FullModelParams& live) const override {
-    for (std::size_t i = 0; i < p.size(); ++i) live.drag_quadratic[axis_of(p[i])] += v[i];
+    add_per_axis(v, p, live.drag_quadratic);
   }
 };
 
