@@ -95,9 +95,9 @@ struct CandidateTrial {
   bool significant = false;
   // What the candidate does for what users fly with (docs/effects.md, "The rules"): with the reference as the
   // velocity, the estimator's validation velocity RMSE (m/s); from the IMU alone, the filter's validation
-  // log-likelihood per measurement (nats). A step must improve it.
-  std::optional<double> velocity_validation;
-  std::optional<double> likelihood_validation;
+  // log-likelihood per measurement (nats). A step must not make it worse (DiagnoseOptions::flight_tolerance).
+  std::optional<double> velocity_validation{};
+  std::optional<double> likelihood_validation{};
   // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level), the
   // minimum-gain rule (its gain against the minimum), or the velocity or likelihood rule. Empty for the one added.
   std::string rejected_by;

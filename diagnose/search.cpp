@@ -70,6 +70,29 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
 
 // Why the parameters [first, end) of a fit are not determined by the data, or nullopt: a standard error that cannot
 // be computed, or standard errors as large as the values themselves (the data cannot tell the effect from none).
+// Which candidates the step may take when judged by the flight: those passing every rule whose validation velocity
+// (with the reference) or likelihood (from the IMU alone) is within flight_tolerance of the best of them. Without the
+// flight's rules, every candidate that passes.
+std::vector<bool> flying_best(const std::vector<CandidateTrial>& trials, bool judged_by_velocity,
+                              const DiagnoseOptions& options) {
+  std::vector<bool> out(trials.size());
+  const auto flight = [&](const CandidateTrial& t) -> std::optional<double> {
+    // Larger is better for both: the velocity's RMSE negated.
+    if (judged_by_velocity) return t.velocity_validation ? std::optional(-*t.velocity_validation) : std::nullopt;
+    return t.likelihood_validation;
+  };
+  std::optional<double> best;
+  for (const CandidateTrial& t : trials) {
+    if (t.significant && flight(t) && (!best || *flight(t) > *best)) best = flight(t);
+  }
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    const std::optional<double> f = flight(trials[i]);
+    out[i] = trials[i].significant &&
+             (!options.judge_by_flight || !best || !f || *f >= *best - options.flight_tolerance * std::abs(*best));
+  }
+  return out;
+}
+
 std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
   double value_norm = 0.0, error_norm = 0.0;
   for (std::size_t i = first; i < fit.values.size(); ++i) {
@@ -359,8 +382,8 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
     // A base no airframe has is not carried on: it is fitted again with its lever arm inside the table (a box
     // inscribed in the table's sphere for the 3-D model), from the same start.
     std::string was = current.summary.implausible.front();
-    setup.lever_arm_bound = options.model == ModelKind::full ? options.limits.lever_arm / std::sqrt(3.0)
-                                                              : options.limits.lever_arm;
+    setup.lever_arm_bound =
+        options.model == ModelKind::full ? options.limits.lever_arm / std::sqrt(3.0) : options.limits.lever_arm;
     current = fit_base();
     char text[480];
     std::snprintf(text, sizeof text,
@@ -386,7 +409,6 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           "inside the table the lever arm went to the edge of its range: the data do not place it, and it is held at "
           "the mass centre (0, 0, 0)");
     }
-
   }
   const Model base_model(signals, setup);
   out.base = current.summary;
@@ -488,6 +510,12 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         }
         State candidate = settle(model, std::move(best), train, validation);
         judge(model, candidate);
+        if (estimator::live_effect_refusal(effect.name())) {
+          // The live estimator does not run it (a vibration line is noise to it): what users fly with is the current
+          // model's, not that of a filter told the residual it leaves is smaller than what it will be given.
+          candidate.summary.velocity = current.summary.velocity;
+          candidate.summary.likelihood = current.summary.likelihood;
+        }
         trial.rmse_train = candidate.summary.rmse_train;
         trial.rmse_validation = candidate.summary.rmse_validation;
         if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;
@@ -555,21 +583,23 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
         const bool flies_better =
             !options.judge_by_flight ? true
-            : judged_by_velocity
-                ? !(velocity_before && t.velocity_validation) || *t.velocity_validation < *velocity_before
-                : !(likelihood_before && t.likelihood_validation) || *t.likelihood_validation > *likelihood_before;
+            : judged_by_velocity     ? !(velocity_before && t.velocity_validation) ||
+                                       *t.velocity_validation <= (1.0 + options.flight_tolerance) * *velocity_before
+                                 : !(likelihood_before && t.likelihood_validation) ||
+                                       *t.likelihood_validation >=
+                                           *likelihood_before - options.flight_tolerance * std::abs(*likelihood_before);
         t.significant = improves && passes_f_test && flies_better;
         char why[260];
         t.rejected_by.clear();
         if (improves && passes_f_test && !flies_better && judged_by_velocity) {
           std::snprintf(why, sizeof why,
-                        "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must lower it)",
+                        "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
                         *velocity_before, *t.velocity_validation);
           t.rejected_by = why;
         } else if (improves && passes_f_test && !flies_better) {
           std::snprintf(why, sizeof why,
                         "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
-                        "must raise it)",
+                        "must not lower it)",
                         *likelihood_before, *t.likelihood_validation);
           t.rejected_by = why;
         } else if (!improves) {
@@ -598,13 +628,19 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         fitted.emplace_back();
       }
     }
-    // Best validation RMSE first; the skipped after, in library order.
+    // Best first, the skipped after, in library order. Judged by the flight, the step taken is among the candidates
+    // that pass every rule and fly best (within flight_tolerance of the best validation velocity or likelihood): the
+    // lowest specific-force residual is no reason to fly a worse velocity, nor to stop when that candidate fails the
+    // flight's rule while another passes. Among those, and otherwise, the lowest validation residual.
+    const std::vector<bool> flies_best = flying_best(trials, judged_by_velocity, options);
     std::vector<std::size_t> order(trials.size());
     for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
     std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
       const bool a_tried = trials[a].skipped.empty(), b_tried = trials[b].skipped.empty();
       if (a_tried != b_tried) return a_tried;
-      return a_tried && trials[a].rmse_validation < trials[b].rmse_validation;
+      if (!a_tried) return false;
+      if (flies_best[a] != flies_best[b]) return static_cast<bool>(flies_best[a]);
+      return trials[a].rmse_validation < trials[b].rmse_validation;
     });
     std::vector<CandidateTrial> sorted;
     for (std::size_t i : order) sorted.push_back(trials[i]);

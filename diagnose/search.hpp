@@ -49,9 +49,15 @@ struct DiagnoseOptions {
   double min_improvement = 0.02;
   // The rules by what users fly with (docs/effects.md, "The velocity or likelihood rule"): a step must also lower the
   // validation velocity (with the reference) or raise the filter's likelihood (from the IMU alone), and a candidate
-  // whose parameters the data do not determine is refused. Opt-in (--judge-by-flight) until the simulated findings
-  // that tests/diagnose_search_test.cpp and diagnose_filter_test.cpp hold are re-established under them.
+  // whose parameters the data do not determine is refused; of the candidates that pass, the one that flies best is
+  // taken. Opt-in (--judge-by-flight) until the simulated findings that tests/diagnose_search_test.cpp and
+  // diagnose_filter_test.cpp hold are re-established under them.
   bool judge_by_flight = false;
+  // What "flies worse" means under those rules: a validation velocity RMSE higher by more than this share, or a
+  // likelihood lower by more than this share of its size. Within it two models fly alike (the same 50-100 s of
+  // validation cannot tell them apart), so an effect that leaves the velocity as it was (a vibration line, a first
+  // step that only makes the velocity self-consistent) is not refused for it, and the residual chooses between them.
+  double flight_tolerance = 0.01;
   std::string session;  // how the report names the data
   // A candidate whose fitted values exceed these is refused, whatever its gain.
   estimator::PlausibilityLimits limits;

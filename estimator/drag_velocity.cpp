@@ -27,7 +27,7 @@ void check(const DragVelocityConfig& c) {
   const bool positive = c.max_gap > 0.0 && c.accel_noise > 0.0 && c.accel_process_noise > 0.0 && c.gyro_noise > 0.0 &&
                         c.gyro_bias_walk > 0.0 && c.initial_velocity_std > 0.0 && c.initial_tilt_std > 0.0 &&
                         c.initial_gyro_bias_std > 0.0 && c.max_specific_force > 0.0 && c.max_rate > 0.0 &&
-                        c.accel_offset_std >= 0.0 && c.rest_speed_std > 0.0;
+                        c.accel_offset_std >= 0.0 && c.wind_std >= 0.0 && c.rest_speed_std > 0.0;
   if (!positive) throw std::invalid_argument("DragVelocityEstimator: config times, noises and limits must be positive");
 }
 
@@ -41,6 +41,10 @@ DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base
     // Measured on the flights that validated the calibration when it was (params.hpp), else a MEMS datasheet's.
     base.accel_offset_std =
         std::max(base.accel_offset_std, params.identification.transfer_offset_std.value_or(kTransferredOffsetStd));
+    // A measured offset std already counts the wind: it is what made the validating flights' NEES honest.
+    if (!params.identification.transfer_offset_std) {
+      base.wind_std = std::max(base.wind_std, kTransferredWindStd);
+    }
   }
   const auto& rmse = params.identification.rmse;
   // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).
@@ -186,7 +190,7 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     // The filter's velocity carries, beside its own variance, the offset's: offset / slope, constant through the
     // flight. Weighed against rest (a Gaussian prior of std rest_speed_std), the product of the two is the output.
     const double offset = config_.accel_offset_std / std::max(drag_slope(k, mu, x_[axis]), 1e-9);
-    const double known = p_(axis, axis) + offset * offset;
+    const double known = p_(axis, axis) + offset * offset + config_.wind_std * config_.wind_std;
     const double rest = config_.rest_speed_std * config_.rest_speed_std;
     out.v[axis] = x_[axis] * rest / (rest + known);
     out.v_var[axis] = known * rest / (rest + known);

@@ -4,6 +4,7 @@
 // the gyro-propagated gravity direction. State and noise design: docs/estimator.md.
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -32,6 +33,10 @@ struct DragVelocityConfig {
   // velocity offset / slope that no run of white noise averages away; its std. 0 on the flight the model was fitted
   // on, where the fit placed the offset; config_for sets kTransferredOffsetStd on any other.
   double accel_offset_std = 0.0;  // m/s^2
+  // The drag gives the velocity through the air; the vehicle's over the ground differs by the wind, which no IMU sees
+  // on a steady heading. On the flight the model was fitted on, its wind went into the fit; on any other the two
+  // flights' winds differ by an unknown amount, per horizontal axis, with this std (config_for: kTransferredWindStd).
+  double wind_std = 0.0;  // m/s
   // What is known of a multirotor's speed before any measurement: within a brisk 5 m/s (plausibility.hpp's
   // kBriskSpeed). The output is the filter's velocity weighed against it: where the drag's slope is too weak for the
   // offset above to be small, the estimate relaxes towards rest and its variance says how little is known.
@@ -53,6 +58,9 @@ DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base
 // accelerometer's zero-g offset (0.02-0.06 g). The upper end, because a variance that claims more than is known
 // flies worse than "not moving", and a strapped-on IMU moved by a degree adds 0.17 m/s^2 of its own.
 inline constexpr double kTransferredOffsetStd = 0.06 * kGravity;
+// The difference between two flights' winds along one body axis, m/s, when nothing measured it: each flight's a light
+// breeze (Beaufort 2, up to 3.3 m/s at 10 m), 3 m/s std, independent from one flight to the next, so sqrt(2) * 3.
+inline const double kTransferredWindStd = std::sqrt(2.0) * 3.0;
 
 struct DragVelocityEstimate {
   double t = 0.0;                                       // s: the sample this describes, delay_samples() back

@@ -421,6 +421,8 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
   for (std::size_t w = 0; w < windows.size(); ++w) {
     if (out[w].samples == 0) throw std::invalid_argument("no estimates inside the evaluation window");
     out[w].estimator = sums[w].filter.rmse();
+    out[w].estimator_mean_error = sums[w].filter.mean();
+    out[w].estimator_constant_known = sums[w].filter.rmse_about_mean();
     out[w].inversion = sums[w].inversion.rmse();
     out[w].eq12 = sums[w].eq12.rmse();
     out[w].zero = sums[w].zero.rmse();

@@ -146,12 +146,20 @@ struct VelocityError {
 
 // Sums squared errors sample by sample into a VelocityError.
 struct VelocityErrorSum {
+  Eigen::Vector2d sums = Eigen::Vector2d::Zero();
   Eigen::Vector2d squares = Eigen::Vector2d::Zero();
   std::size_t count = 0;
-  void add(const Eigen::Vector2d& error) { squares += error.cwiseAbs2(), ++count; }
+  void add(const Eigen::Vector2d& error) { sums += error, squares += error.cwiseAbs2(), ++count; }
+  Eigen::Vector2d mean() const { return sums / static_cast<double>(std::max<std::size_t>(count, 1)); }
   VelocityError rmse() const {
-    const Eigen::Vector2d mean = squares / static_cast<double>(std::max<std::size_t>(count, 1));
-    return {mean.cwiseSqrt(), std::sqrt(mean.sum())};
+    const Eigen::Vector2d mean_square = squares / static_cast<double>(std::max<std::size_t>(count, 1));
+    return {mean_square.cwiseSqrt(), std::sqrt(mean_square.sum())};
+  }
+  // The RMSE about the mean error: what is left once the window's constant error is taken out.
+  VelocityError rmse_about_mean() const {
+    const Eigen::Vector2d variance =
+        (squares / static_cast<double>(std::max<std::size_t>(count, 1)) - mean().cwiseAbs2()).cwiseMax(0.0);
+    return {variance.cwiseSqrt(), std::sqrt(variance.sum())};
   }
 };
 
@@ -162,6 +170,12 @@ struct VelocityEvaluation {
   VelocityError inversion;  // the drag law inverted sample by sample (the filter's measurement)
   VelocityError eq12;       // open-loop integration: dead_reckon(), eq. (12)'s 3-D generalisation
   VelocityError zero;       // "not moving": the reference's own RMS speed
+  // The filter's error split in two: its mean over the window (m/s, per axis), and the RMSE left about that mean, what
+  // the filter would score if the flight's constant were known. A calibration carried to another flight is off by a
+  // constant it cannot see from the IMU on a steady heading (the wind along the flight, the accelerometer's offset:
+  // docs/estimator.md); needing the reference, this is a bound, not a result.
+  Eigen::Vector2d estimator_mean_error = Eigen::Vector2d::Zero();
+  VelocityError estimator_constant_known;
   // Whether the filter's variance is honest: the mean over scored samples of its normalised error squared,
   // sum over x, y of (v - v_ref)^2 / v_var. A filter whose variance says what its error is gives 2 (the axes); more
   // means it claims more certainty than it has.

@@ -39,7 +39,7 @@ struct Identification {
   double process_noise = 0.0;
   // s: the reference velocity's delay behind the IMU that the reference was shifted by before fitting and scoring
   // (declared or estimated: docs/identification.md, "Reference delay"); absent when there was no reference.
-  std::optional<double> reference_delay;
+  std::optional<double> reference_delay{};
   // m/s^2: the accelerometer offset a flight carries that the calibration was not fitted on, measured on the flights
   // that validated it (the std that makes the filter's NEES 2 there: estimator::measure_transfer_offset); absent when
   // not measured (one flight, or validating flights without a reference), and kTransferredOffsetStd applies.

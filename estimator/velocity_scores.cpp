@@ -176,6 +176,7 @@ TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::
     for (std::size_t i = 0; i < flights.size(); ++i) {
       DragVelocityConfig config = config_for(flown[i]);
       config.accel_offset_std = offset_std;
+      config.wind_std = 0.0;  // the std measured here is the whole of what a new flight carries, its wind included
       const VelocityEvaluation e = evaluate_velocity(flights[i], flown[i].full, windows[i], config);
       sum += e.nees * static_cast<double>(e.samples);
       samples += e.samples;

@@ -139,6 +139,14 @@ TEST_F(IdentifyCommand, EvaluateScoresTheEstimatorAgainstTheReference) {
   EXPECT_LT(rmse["estimator"]["horizontal"], rmse["zero"]["horizontal"]);
   EXPECT_LT(rmse["estimator"]["horizontal"], rmse["raw_inversion"]["horizontal"]);
   EXPECT_LT(rmse["estimator"]["horizontal"], rmse["eq12"]["horizontal"]);
+  // The filter's error splits into its mean over the window and what is left about it: squares add up per axis.
+  for (int axis = 0; axis < 2; ++axis) {
+    const char* name = axis == 0 ? "x" : "y";
+    const double whole = rmse["estimator"][name], left = rmse["estimator_constant_known"][name];
+    const double mean = e["estimator_mean_error_m_s"][axis];
+    EXPECT_LE(left, whole);
+    EXPECT_NEAR(whole * whole, left * left + mean * mean, 1e-9 + 1e-9 * whole * whole) << axis;
+  }
 }
 
 TEST_F(IdentifyCommand, EvaluateScoresOneCalibrationOverSeveralFlights) {

@@ -124,7 +124,8 @@ Flight fly(double duration, unsigned seed, const FlightOptions& options = {}) {
   // The gyro bias the filter's own states track, plus the truth's (the gyro_bias effect).
   const Eigen::Vector3d gyro_bias_imu = Eigen::Vector3d(0.01, -0.008, 0.0) + p.gyro_bias;
   const Eigen::Vector3d wind(p.wind.x(), p.wind.y(), 0.0);  // the flight starts at yaw 0: wind_heading 0
-  const Eigen::Matrix3d sensor = Eigen::Matrix3d::Identity() + Eigen::Matrix3d(p.accel_scale.asDiagonal()) + p.accel_cross;
+  const Eigen::Matrix3d sensor =
+      Eigen::Matrix3d::Identity() + Eigen::Matrix3d(p.accel_scale.asDiagonal()) + p.accel_cross;
   const auto lag = static_cast<int>(std::lround(p.time_offset / kH));  // the accelerometer's delay, in samples
   EXPECT_NEAR(lag * kH, p.time_offset, 1e-12);
 
@@ -267,30 +268,60 @@ TEST(DragVelocityEstimator, BeatsTheRawInversionAndStaysUnbiasedWithABiasedGyro)
   EXPECT_LT((r.estimates.back().gyro_bias - flight.gyro_bias_body).norm(), 0.1 * flight.gyro_bias_body.norm());
 }
 
+// The estimate after a minute level and without rotation at 200 Hz, the accelerometer reading `accel` throughout.
+DragVelocityEstimate steady_level_estimate(const FullModelParams& params, const DragVelocityConfig& config,
+                                           const Eigen::Vector3d& accel) {
+  DragVelocityEstimator estimator(params, config);
+  std::optional<DragVelocityEstimate> last;
+  for (int k = 0; k < 200 * 60; ++k) {
+    if (auto e = estimator.update({k / 200.0, Eigen::Vector3d::Zero(), accel})) last = e;
+  }
+  return *last;
+}
+
 TEST(DragVelocityEstimator, WhereTheDragIsTooWeakToReadItRelaxesTowardsRestInsteadOfInventingASpeed) {
   // A vehicle at rest, level, whose accelerometer reads a zero-g offset of 0.3 m/s^2 no fit of this flight placed
   // (a calibration from another flight), with a drag so weak (k = 0.02 1/s) that the offset reads as 15 m/s.
   FullModelParams weak;
   weak.drag_linear = {0.02, 0.02};
   const auto final_estimate = [&](const DragVelocityConfig& config) {
-    DragVelocityEstimator estimator(weak, config);
-    std::optional<DragVelocityEstimate> last;
-    for (int k = 0; k < 200 * 60; ++k) {
-      if (auto e = estimator.update({k / 200.0, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.3, 0.0, -kGravity)}))
-        last = e;
-    }
-    return *last;
+    return steady_level_estimate(weak, config, Eigen::Vector3d(0.3, 0.0, -kGravity));
   };
   DragVelocityConfig blind;  // the offset's share of the error not counted: the mechanism off
   const DragVelocityEstimate invented = final_estimate(blind);
-  EXPECT_LT(invented.v.x(), -10.0);                        // it flies 10+ m/s backwards, sure of it
+  EXPECT_LT(invented.v.x(), -10.0);  // it flies 10+ m/s backwards, sure of it
   EXPECT_LT(invented.v_var.x(), invented.v.x() * invented.v.x() / 100.0);
   DragVelocityConfig told;
   told.accel_offset_std = kTransferredOffsetStd;
   const DragVelocityEstimate honest = final_estimate(told);
-  EXPECT_GT(honest.v.x(), -2.0);                           // relaxed towards rest ...
+  EXPECT_GT(honest.v.x(), -2.0);                                   // relaxed towards rest ...
   EXPECT_GT(4.0 * honest.v_var.x(), honest.v.x() * honest.v.x());  // ... and its variance covers what is left
-  EXPECT_GT(std::sqrt(honest.v_var.x()), 3.0);             // it says how little it knows
+  EXPECT_GT(std::sqrt(honest.v_var.x()), 3.0);                     // it says how little it knows
+}
+
+TEST(DragVelocityEstimator, OnAnotherFlightTheUnknownWindWeighsTheVelocityTowardsRest) {
+  // A steady 4 m/s through the air, read by a strong drag (k = 0.5 1/s: the accelerometer's offset is a small share).
+  // Over the ground the vehicle flies 4 m/s plus a wind that a calibration from another flight does not know.
+  FullModelParams strong;
+  strong.drag_linear = {0.5, 0.5};
+  const auto final_estimate = [&](const DragVelocityConfig& config) {
+    return steady_level_estimate(strong, config, Eigen::Vector3d(-2.0, 0.0, -kGravity));  // the drag, -k v, on x
+  };
+  DragVelocityConfig own_flight;  // the model's own flight: its wind is in the fit
+  const DragVelocityEstimate own = final_estimate(own_flight);
+  DragVelocityConfig another = own_flight;
+  another.wind_std = kTransferredWindStd;
+  const DragVelocityEstimate flown = final_estimate(another);
+  EXPECT_GT(own.v.x(), 3.8);
+  const double rest = own_flight.rest_speed_std * own_flight.rest_speed_std;
+  const double wind = kTransferredWindStd * kTransferredWindStd;
+  // The same filter state x with the same variance p (own.v = x rest / (rest + p), own.v_var = p rest / (rest + p)),
+  // weighed against rest with the wind's variance added to p.
+  const double p = own.v_var.x() * rest / (rest - own.v_var.x());
+  const double x = own.v.x() * (rest + p) / rest;
+  EXPECT_NEAR(flown.v.x(), x * rest / (rest + p + wind), 1e-9);
+  EXPECT_LT(flown.v.x(), 0.7 * own.v.x());                 // relaxed towards rest ...
+  EXPECT_GT(flown.v_var.x(), own.v_var.x() + 0.3 * wind);  // ... and it says the wind is not known
 }
 
 TEST(DragVelocityEstimator, CompensatedForceIsTheDrag) {
@@ -483,7 +514,7 @@ TEST(DragVelocityEffects, AccelerometerScaleAndCrossAxisErrorsAreUndone) {
   FlightOptions truth;
   truth.params.accel_scale = {0.05, -0.04, 0.03};
   truth.params.accel_cross << 0.0, 0.03, 0.02,  // x reads 2 % of z: 0.2 m/s^2 of thrust on a drag axis
-      -0.02, 0.0, -0.015,                         //
+      -0.02, 0.0, -0.015,                       //
       0.01, 0.01, 0.0;
   const EffectRun r = with_and_without(truth, flight_params());
   EXPECT_LT(r.with, 0.5 * r.without);
@@ -574,8 +605,8 @@ TEST(VelocityEvaluation, ScoresInTheEstimatorsBodyFrame) {
   FlightOptions truth;
   truth.params.mounting = {0.01, -0.02, kPi / 2};
   const Flight flight = fly(duration, 23, truth);
-  const Eigen::Quaterniond imu_to_body(Eigen::AngleAxisd(truth.params.mounting.norm(),
-                                                         truth.params.mounting.normalized()));
+  const Eigen::Quaterniond imu_to_body(
+      Eigen::AngleAxisd(truth.params.mounting.norm(), truth.params.mounting.normalized()));
   ImuSeries series;
   series.reference.emplace();
   for (std::size_t k = 0; k < flight.samples.size(); ++k) {

@@ -52,8 +52,12 @@ TEST(TransferOffset, TheLiveFilterCountsTheMeasuredOffsetOnAnotherFlightOnly) {
   EXPECT_EQ(config_for(params).accel_offset_std, 0.0);  // the flight it was fitted on
   params.transferred = true;
   EXPECT_EQ(config_for(params).accel_offset_std, 0.8);
+  EXPECT_EQ(config_for(params).wind_std, 0.0);  // the measured offset is all a new flight carries, wind included
   params.identification.transfer_offset_std.reset();
   EXPECT_EQ(config_for(params).accel_offset_std, kTransferredOffsetStd);
+  EXPECT_EQ(config_for(params).wind_std, kTransferredWindStd);  // nothing measured: two flights' winds differ
+  params.transferred = false;
+  EXPECT_EQ(config_for(params).wind_std, 0.0);  // its own flight's wind went into the fit
 }
 
 TEST(TransferOffset, RefusesFlightsItCannotScore) {

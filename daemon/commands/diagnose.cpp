@@ -337,8 +337,9 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
   cmd->add_flag("--judge-by-flight", o->judge_by_flight,
-                "Keep a step only if it also lowers the validation velocity (reference) or raises the filter's "
-                "likelihood (IMU alone), and refuse undetermined candidates (docs/effects.md)");
+                "Keep a step only if it does not fly worse: the validation velocity (reference) or the filter's "
+                "likelihood (IMU alone); of the candidates that pass, take one that flies best; refuse undetermined "
+                "candidates (docs/effects.md)");
   cmd->add_option("--lowpass", o->lowpass_hz,
                   "Compare model and measurement below this frequency only, Hz (0: off); for airframes whose "
                   "vibration swamps the accelerometers")

@@ -123,7 +123,10 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
     out["rmse_m_s"] = {{"estimator", to_json(e.estimator)},
                        {"raw_inversion", to_json(e.inversion)},
                        {"eq12", to_json(e.eq12)},
-                       {"zero", to_json(e.zero)}};
+                       {"zero", to_json(e.zero)},
+                       {"estimator_constant_known", to_json(e.estimator_constant_known)}};
+    // The filter's constant error over the window, and above what it scores without it (a bound: needs the reference).
+    out["estimator_mean_error_m_s"] = {e.estimator_mean_error.x(), e.estimator_mean_error.y()};
     // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
     out["estimator_nees"] = e.nees;
     out["estimator_counters"] = {{"samples_in", c.samples_in},
@@ -186,9 +189,12 @@ json summarise(const json& flights, std::size_t failed) {
     std::vector<double> rmse, ratio;
     std::size_t worse = 0;
   };
-  std::vector<Column> columns{{"estimator", true, {}, {}}, {"least_squares_smoothed", false, {}, {}}};
+  std::vector<Column> columns{{"estimator", true, {}, {}},
+                              {"least_squares_smoothed", false, {}, {}},
+                              {"estimator_constant_known", false, {}, {}}};
   std::vector<double> zero, nees;
-  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s\n", "session", "zero", "estimator", "ratio", "nees", "ls_smoothed");
+  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s %12s\n", "session", "zero", "estimator", "ratio", "nees",
+               "ls_smoothed", "const_known");
   for (const json& f : flights) {
     const long long session = f["session"].get<long long>();
     if (f.contains("error")) {
