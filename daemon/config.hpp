@@ -31,6 +31,7 @@ struct DeviceSelector {
   std::filesystem::path path;  // e.g. /dev/ttyUSB0, /dev/serial/by-id/..., or a pty symlink
   std::optional<std::uint16_t> usb_vid, usb_pid;
   std::optional<std::string> usb_serial;  // with vid/pid: the one radio of several identical ones
+  friend bool operator==(const DeviceSelector&, const DeviceSelector&) = default;
 };
 
 struct VehicleFeedbackConfig {

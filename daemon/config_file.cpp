@@ -9,12 +9,14 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <stdexcept>
 
 #include "archive/pg_connection.hpp"
+#include "daemon/config_table.hpp"
 #include "daemon/endpoint.hpp"
 #include "daemon/toml_table.hpp"
 #include "daemon/vehicle_feedback.hpp"
@@ -61,9 +63,7 @@ toml::array to_toml_array(const json& j) {
   return a;
 }
 
-void read_ms(TomlTable& t, std::string_view key, std::chrono::milliseconds& out, std::int64_t min, std::int64_t max) {
-  if (auto ms = t.integer(key, min, max)) out = std::chrono::milliseconds(*ms);
-}
+// Codecs of the keys whose values are more than a number or a string. Generic ones: daemon/config_table.hpp.
 
 Endpoint parse_endpoint_at(const TomlTable& t, std::string_view key, const std::string& text) {
   try {
@@ -72,40 +72,193 @@ Endpoint parse_endpoint_at(const TomlTable& t, std::string_view key, const std::
     t.fail(key, e.what());
   }
 }
-std::optional<Endpoint> read_endpoint(TomlTable& t, std::string_view key) {
-  const auto text = t.string(key);
-  if (!text) return std::nullopt;
-  return parse_endpoint_at(t, key, *text);
-}
-std::vector<Endpoint> read_endpoints(TomlTable& t, std::string_view key) {
-  std::vector<Endpoint> out;
-  for (const auto& text : t.strings(key)) out.push_back(parse_endpoint_at(t, key, text));
-  return out;
-}
 
-// Unknown keys of a calibration table are reported like any other: its layout is the reference board's JSON.
-protocol::Calibration read_calibration(TomlTable& link) {
-  auto table = link.table("calibration");
-  if (!table) return protocol::Calibration::reference_board();
-  json calibration = pipeline::calibration_to_json(protocol::Calibration::reference_board());
-  check_keys(*table, calibration);
-  calibration.merge_patch(toml_to_json(table->raw()));  // keys left out keep the reference board's values
-  try {
-    return pipeline::calibration_from_json(calibration);
-  } catch (const std::exception& e) {  // a wrongly typed value, or not a valid calibration
-    link.fail("calibration", std::string("is not usable: ") + e.what());
+// An endpoint as written ("udp://127.0.0.1:9870"), which its text keeps.
+struct EndpointText {
+  std::optional<Endpoint> read(TomlTable& t, std::string_view key) const {
+    const auto text = t.string(key);
+    if (!text) return std::nullopt;
+    return parse_endpoint_at(t, key, *text);
   }
-}
+  std::string write(const Endpoint& endpoint) const { return endpoint.text; }
+};
 
-DeviceSelector read_device(TomlTable& link) {
-  DeviceSelector device;
+// An array of endpoints, written even when empty.
+struct EndpointTexts {
+  std::optional<std::vector<Endpoint>> read(TomlTable& t, std::string_view key) const {
+    std::vector<Endpoint> out;
+    for (const auto& text : t.strings(key)) out.push_back(parse_endpoint_at(t, key, text));
+    return out;
+  }
+  toml::array write(const std::vector<Endpoint>& endpoints) const {
+    toml::array texts;
+    for (const auto& e : endpoints) texts.push_back(e.text);
+    return texts;
+  }
+};
+
+// A TCP address to listen on, written without a scheme ("127.0.0.1:8765").
+struct ListenAddress {
+  std::optional<Endpoint> read(TomlTable& t, std::string_view key) const {
+    const auto text = t.string(key);
+    if (!text) return std::nullopt;
+    Endpoint listen = parse_endpoint_at(t, key, "tcp-listen://" + *text);
+    listen.text = *text;
+    return listen;
+  }
+  std::string write(const Endpoint& endpoint) const { return endpoint.text; }
+};
+
+// A number of MiB held as bytes.
+struct Mebibytes {
+  double max;
+  bool zero_or_at_least_one = false;  // a size cap: below a fresh database's size every check would rotate again
+  std::optional<std::uint64_t> read(TomlTable& t, std::string_view key) const {
+    const auto mib = t.number(key, 0, max);
+    if (!mib) return std::nullopt;
+    if (zero_or_at_least_one && *mib > 0 && *mib < 1) t.fail(key, "must be 0 (no cap) or at least 1");
+    return std::llround(*mib * kMiB);
+  }
+  double write(std::uint64_t bytes) const { return static_cast<double>(bytes) / kMiB; }
+};
+
+// A whole number of KiB held as bytes.
+struct Kibibytes {
+  std::int64_t min, max;
+  std::optional<std::size_t> read(TomlTable& t, std::string_view key) const {
+    if (auto kib = t.integer(key, min, max)) return static_cast<std::size_t>(*kib) * 1024;
+    return std::nullopt;
+  }
+  std::int64_t write(std::size_t bytes) const { return static_cast<std::int64_t>(bytes / 1024); }
+};
+
+struct WireFormatName {
+  std::optional<protocol::WireFormat> read(TomlTable& t, std::string_view key) const {
+    const auto name = t.string(key);
+    if (!name) return std::nullopt;
+    try {
+      return protocol::parse_wire_format(*name);
+    } catch (const std::invalid_argument& e) {
+      t.fail(key, e.what());
+    }
+  }
+  std::string write(protocol::WireFormat format) const { return std::string(protocol::wire_format_name(format)); }
+};
+
+struct BaudRate {
+  std::optional<std::uint32_t> read(TomlTable& t, std::string_view key) const {
+    const toml::node* baud = t.find(key);
+    if (!baud) return std::nullopt;
+    const auto* rate = baud->as_integer();
+    if (!rate) t.fail(key, "must be a whole number of bits per second, e.g. 115200");
+    try {
+      check_baud(rate->get());
+    } catch (const std::invalid_argument& e) {
+      t.fail(key, e.what());
+    }
+    return static_cast<std::uint32_t>(rate->get());
+  }
+  std::int64_t write(std::uint32_t baud) const { return baud; }
+};
+
+// Kept as written; estimator::parse_imu_axes() reads it when the link starts.
+struct ImuAxesText {
+  std::optional<std::string> read(TomlTable& t, std::string_view key) const {
+    auto axes = t.string(key);
+    if (!axes) return std::nullopt;
+    try {
+      estimator::parse_imu_axes(*axes);
+    } catch (const std::invalid_argument& e) {
+      t.fail(key, e.what());
+    }
+    return axes;
+  }
+  std::string write(const std::string& axes) const { return axes; }
+};
+
+struct ImuMessageName {
+  std::optional<std::string> read(TomlTable& t, std::string_view key) const {
+    auto imu = t.string(key);
+    if (imu && !mavlink_imu_msgid(*imu)) {
+      t.fail(key, "must be one of 'HIGHRES_IMU', 'SCALED_IMU', 'SCALED_IMU2', 'SCALED_IMU3', 'RAW_IMU'");
+    }
+    return imu;
+  }
+  std::string write(const std::string& imu) const { return imu; }
+};
+
+// A 64-bit XBee address as 16 hex digits (a string: TOML integers are signed).
+struct HexAddress {
+  std::optional<std::uint64_t> read(TomlTable& t, std::string_view key) const {
+    const auto text = t.string(key);
+    if (!text) return std::nullopt;
+    try {
+      return protocol::parse_hex(*text, 16);
+    } catch (const std::invalid_argument& e) {
+      t.fail(key, e.what());
+    }
+  }
+  std::string write(std::uint64_t address) const { return protocol::hex(address, 8); }
+};
+
+// A table laid out as the reference board's calibration JSON; keys left out keep the reference board's values.
+// Unknown keys are reported like any other.
+struct CalibrationTable {
+  std::optional<protocol::Calibration> read(TomlTable& link, std::string_view key) const {
+    auto table = link.table(key);
+    if (!table) return std::nullopt;
+    json calibration = pipeline::calibration_to_json(protocol::Calibration::reference_board());
+    check_keys(*table, calibration);
+    calibration.merge_patch(toml_to_json(table->raw()));
+    try {
+      return pipeline::calibration_from_json(calibration);
+    } catch (const std::exception& e) {  // a wrongly typed value, or not a valid calibration
+      link.fail(key, std::string("is not usable: ") + e.what());
+    }
+  }
+  toml::table write(const protocol::Calibration& calibration) const {
+    return to_toml_table(pipeline::calibration_to_json(calibration));
+  }
+  // Calibration has no ==; its JSON holds every value.
+  void compare(const protocol::Calibration& a, const protocol::Calibration& b, const std::string& path,
+               const KeyVisitor& visit) const {
+    const json first = pipeline::calibration_to_json(a);
+    visit(path, first == pipeline::calibration_to_json(b),
+          first == pipeline::calibration_to_json(protocol::Calibration::reference_board()));
+  }
+};
+
+// MAVLink message name -> Hz.
+struct RequestRates {
+  std::optional<std::map<std::string, double>> read(TomlTable& link, std::string_view key) const {
+    auto rates = link.table(key);
+    if (!rates) return std::nullopt;
+    std::map<std::string, double> out;
+    for (const auto& [message, value] : rates->raw()) {
+      const std::string name(message.str());
+      if (!mavlink_message_id(name)) rates->fail(name, "is not a MAVLink message name (e.g. HIGHRES_IMU, ATTITUDE)");
+      out[name] = *rates->number(name, 0.1, 2000);
+    }
+    rates->finish();
+    return out;
+  }
+  toml::table write(const std::map<std::string, double>& rates) const {
+    toml::table out;
+    for (const auto& [name, hz] : rates) out.insert(name, hz);
+    return out;
+  }
+};
+
+// A link's device is one of two keys: 'device' (a path) or 'usb' (vid, pid and maybe serial).
+void read_device_selector(TomlTable& link, LinkConfig& out) {
+  DeviceSelector& device = out.device;
   const auto path = link.string("device");
   auto usb = link.table("usb");
   if (path.has_value() == usb.has_value()) link.fail("", "needs exactly one of 'device' (a path) and 'usb'");
   if (path) {
     if (path->empty()) link.fail("device", "must not be empty");
     device.path = *path;
-    return device;
+    return;
   }
   const auto vid = usb->integer("vid", 0, 0xFFFF);
   const auto pid = usb->integer("pid", 0, 0xFFFF);
@@ -114,101 +267,26 @@ DeviceSelector read_device(TomlTable& link) {
   device.usb_pid = static_cast<std::uint16_t>(*pid);
   device.usb_serial = usb->string("serial");
   usb->finish();
-  return device;
+}
+void write_device_selector(const LinkConfig& in, toml::table& link) {
+  const DeviceSelector& device = in.device;
+  if (!device.usb_vid) {
+    link.insert("device", device.path.string());
+    return;
+  }
+  toml::table usb{{"vid", static_cast<std::int64_t>(*device.usb_vid)},
+                  {"pid", static_cast<std::int64_t>(*device.usb_pid)}};
+  if (device.usb_serial) usb.insert("serial", *device.usb_serial);
+  link.insert("usb", std::move(usb));
 }
 
-LinkConfig read_link(TomlTable& t) {
-  LinkConfig link;
-  link.name = t.string("name").value_or("");
-  if (link.name.empty()) t.fail("", "needs a 'name'");
-  link.device = read_device(t);
-  if (auto format = t.string("protocol")) {
-    try {
-      link.format = protocol::parse_wire_format(*format);
-    } catch (const std::invalid_argument& e) {
-      t.fail("protocol", e.what());
-    }
-  }
-  if (const toml::node* baud = t.find("baud")) {
-    const auto* rate = baud->as_integer();
-    if (!rate) t.fail("baud", "must be a whole number of bits per second, e.g. 115200");
-    try {
-      check_baud(rate->get());
-    } catch (const std::invalid_argument& e) {
-      t.fail("baud", e.what());
-    }
-    link.baud = static_cast<std::uint32_t>(rate->get());
-  }
-  link.calibration = read_calibration(t);
-  if (auto axes = t.string("axes")) {
-    try {
-      estimator::parse_imu_axes(*axes);
-      link.axes = *axes;
-    } catch (const std::invalid_argument& e) {
-      t.fail("axes", e.what());
-    }
-  }
-  if (auto imu = t.string("imu")) {
-    if (!mavlink_imu_msgid(*imu)) {
-      t.fail("imu", "must be one of 'HIGHRES_IMU', 'SCALED_IMU', 'SCALED_IMU2', 'SCALED_IMU3', 'RAW_IMU'");
-    }
-    link.imu = *imu;
-  }
-  if (auto id = t.integer("imu_id", 0, 255)) link.imu_id = static_cast<std::uint8_t>(*id);
-  if (auto rates = t.table("request_rates")) {
-    for (const auto& [key, value] : rates->raw()) {
-      const std::string name(key.str());
-      if (!mavlink_message_id(name)) rates->fail(name, "is not a MAVLink message name (e.g. HIGHRES_IMU, ATTITUDE)");
-      link.request_rates[name] = *rates->number(name, 0.1, 2000);
-    }
-    rates->finish();
-  }
-  if (auto id = t.integer("gcs_sysid", 1, 255)) link.gcs_sysid = static_cast<std::uint8_t>(*id);
-  if (auto id = t.integer("gcs_compid", 0, 255)) link.gcs_compid = static_cast<std::uint8_t>(*id);
-  link.bridge = read_endpoints(t, "bridge");
-  if (auto feedback = t.table("feedback")) {
-    link.feedback.enabled = feedback->boolean("enabled").value_or(true);
-    link.feedback.rate_hz = feedback->number("rate_hz", 0.01, 1000).value_or(link.feedback.rate_hz);
-    if (auto destination = feedback->string("xbee_destination64")) {
-      try {
-        link.feedback.xbee_destination64 = protocol::parse_hex(*destination, 16);
-      } catch (const std::invalid_argument& e) {
-        feedback->fail("xbee_destination64", e.what());
-      }
-    }
-    feedback->finish();
-  }
-  read_ms(t, "reconnect_min_ms", link.reconnect_min, 1, 3'600'000);
-  read_ms(t, "reconnect_max_ms", link.reconnect_max, 1, 3'600'000);
-  t.finish();
-  return link;
-}
-
-StoreConfig read_store(TomlTable& t) {
-  StoreConfig store;
-  if (auto path = t.string("path")) store.path = *path;
-  read_ms(t, "commit_interval_ms", store.commit_interval, 1, 60'000);
-  if (auto mib = t.number("max_size_mib", 0, 1e9)) {
-    // Below a fresh database's size every check would rotate again.
-    if (*mib > 0 && *mib < 1) t.fail("max_size_mib", "must be 0 (no cap) or at least 1");
-    store.max_size_bytes = std::llround(*mib * kMiB);
-  }
-  if (auto mib = t.number("min_free_mib", 0, 1e9)) store.min_free_bytes = std::llround(*mib * kMiB);
-  if (auto on_full = t.choice<StoreConfig::OnFull>(
-          "on_full", {{"rotate", StoreConfig::OnFull::rotate}, {"stop", StoreConfig::OnFull::stop}})) {
-    store.on_full = *on_full;
-  }
-  t.finish();
-  return store;
-}
-
-// mqtt://HOST[:PORT] or mqtts://HOST[:PORT]. Unlike an endpoint's, the host may be a name: libmosquitto resolves it
-// on its own thread, so a slow DNS never holds up recording.
-void parse_mqtt_url(TomlTable& t, const std::string& text, MqttConfig& mqtt) {
+// mqtt://HOST[:PORT] or mqtts://HOST[:PORT], from the url already read. Unlike an endpoint's, the host may be a name:
+// libmosquitto resolves it on its own thread, so a slow DNS never holds up recording.
+void set_broker_address(TomlTable& t, MqttConfig& mqtt) {
   const auto bad = [&](const std::string& why) {
-    t.fail("url", "'" + text + "': " + why + " (expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT])");
+    t.fail("url", "'" + mqtt.url + "': " + why + " (expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT])");
   };
-  std::string_view rest = text;
+  std::string_view rest = mqtt.url;
   if (rest.starts_with("mqtt://")) {
     rest.remove_prefix(7);
   } else if (rest.starts_with("mqtts://")) {
@@ -242,7 +320,6 @@ void parse_mqtt_url(TomlTable& t, const std::string& text, MqttConfig& mqtt) {
     }
     mqtt.port = static_cast<std::uint16_t>(value);
   }
-  mqtt.url = text;
   mqtt.host = host;
 }
 
@@ -253,91 +330,179 @@ bool is_plain_name(std::string_view name) {
   });
 }
 
-MqttConfig read_mqtt(TomlTable& t) {
-  MqttConfig mqtt;
-  const auto url = t.string("url");
-  if (!url) t.fail("", "needs a 'url' (mqtt://HOST[:PORT] or mqtts://HOST[:PORT])");
-  parse_mqtt_url(t, *url, mqtt);
-  const auto station = t.string("station");
-  if (!station) t.fail("", "needs a 'station': this ground station's name in the topics, e.g. \"field-1\"");
-  if (!is_plain_name(*station)) t.fail("station", "must be letters, digits, '_', '-' or '.' (it is a topic level)");
-  mqtt.station = *station;
-  if (auto qos = t.integer("qos", 0, 1)) mqtt.qos = static_cast<int>(*qos);
-  if (auto hz = t.number("sample_hz", 0, 100'000)) mqtt.sample_hz = *hz;
-  mqtt.estimate_hz = t.number("estimate_hz", 0, 100'000);
-  if (auto s = t.integer("keepalive_s", 5, 65'535)) mqtt.keepalive = std::chrono::seconds(*s);  // libmosquitto's range
-  if (auto s = t.integer("reconnect_min_s", 1, 3600)) mqtt.reconnect_min = std::chrono::seconds(*s);
-  if (auto s = t.integer("reconnect_max_s", 1, 3600)) mqtt.reconnect_max = std::chrono::seconds(*s);
+// [outputs.mqtt] and [sync] name where to read a password, from one source.
+template <typename Struct>
+void one_password_source(TomlTable& t, Struct& config) {
+  if (config.password_file && config.password_env) t.fail("password_env", "and password_file: give one of them");
+}
+
+// Rules across keys, each run after the key of its row is read.
+
+void check_station(TomlTable& t, MqttConfig& mqtt) {
+  if (!is_plain_name(mqtt.station)) t.fail("station", "must be letters, digits, '_', '-' or '.' (it is a topic level)");
+}
+void check_reconnect_order(TomlTable& t, MqttConfig& mqtt) {
   if (mqtt.reconnect_min > mqtt.reconnect_max) t.fail("reconnect_min_s", "is above reconnect_max_s");
-  if (auto n = t.integer("outbox", 16, 10'000'000)) mqtt.outbox = static_cast<std::size_t>(*n);
-  mqtt.username = t.string("username");
-  if (t.find("password")) {
-    t.fail("password", "is never written in the configuration: use password_file or password_env");
-  }
-  if (auto file = t.string("password_file")) mqtt.password_file = *file;
-  mqtt.password_env = t.string("password_env");
-  if (mqtt.password_file && mqtt.password_env) t.fail("password_env", "and password_file: give one of them");
+}
+void check_broker_password(TomlTable& t, MqttConfig& mqtt) {
+  one_password_source(t, mqtt);
   if ((mqtt.password_file || mqtt.password_env) && !mqtt.username) {
     t.fail(mqtt.password_file ? "password_file" : "password_env", "needs a 'username'");
   }
-  if (auto ca = t.string("ca_file")) {
-    if (!mqtt.tls) t.fail("ca_file", "is for mqtts:// URLs");
-    mqtt.ca_file = *ca;
-  }
-  mqtt.client_id = t.string("client_id").value_or("imubridge-" + mqtt.station);
-  if (mqtt.client_id.empty()) t.fail("client_id", "must not be empty");
-  if (auto version = t.choice<int>("protocol_version", {{"3.1.1", 4}, {"5", 5}})) mqtt.protocol_version = *version;
-  t.finish();
-  return mqtt;
+}
+void check_ca_file(TomlTable& t, MqttConfig& mqtt) {
+  if (mqtt.ca_file && !mqtt.tls) t.fail("ca_file", "is for mqtts:// URLs");
+}
+// The key itself may not be "", so empty means absent.
+void default_client_id(TomlTable&, MqttConfig& mqtt) {
+  if (mqtt.client_id.empty()) mqtt.client_id = "imubridge-" + mqtt.station;
 }
 
-FoxgloveConfig read_foxglove(TomlTable& t) {
-  FoxgloveConfig foxglove;
-  if (auto listen = t.string("listen")) {
-    foxglove.listen = parse_endpoint_at(t, "listen", "tcp-listen://" + *listen);
-    foxglove.listen.text = *listen;
-  }
-  foxglove.sample_hz = t.number("sample_hz", 0, 100'000);
-  foxglove.estimate_hz = t.number("estimate_hz", 0, 100'000);
-  if (auto n = t.integer("queue", 16, 10'000'000)) foxglove.queue = static_cast<std::size_t>(*n);
-  if (auto kib = t.integer("client_queue_kib", 16, 1'048'576)) {
-    foxglove.client_queue_bytes = static_cast<std::size_t>(*kib) * 1024;
-  }
-  t.finish();
-  return foxglove;
+// The tables of keys, one row per key, in the order keys are read (the order mistakes are found in).
+
+KeyTable<MqttConfig> mqtt_keys() {
+  using M = MqttConfig;
+  using std::chrono::seconds;
+  return {
+      key("url", &M::url, Text<>{},
+          {.required = "needs a 'url' (mqtt://HOST[:PORT] or mqtts://HOST[:PORT])", .then = set_broker_address}),
+      key("station", &M::station, Text<>{},
+          {.required = "needs a 'station': this ground station's name in the topics, e.g. \"field-1\"",
+           .then = check_station}),
+      key("qos", &M::qos, Integer<int>{0, 1}),
+      key("sample_hz", &M::sample_hz, Number{0, 100'000}),
+      key("estimate_hz", &M::estimate_hz, Number{0, 100'000}),
+      key("keepalive_s", &M::keepalive, WholeDuration<seconds>{5, 65'535}),  // libmosquitto's range
+      key("reconnect_min_s", &M::reconnect_min, WholeDuration<seconds>{1, 3600}),
+      key("reconnect_max_s", &M::reconnect_max, WholeDuration<seconds>{1, 3600}, {.then = check_reconnect_order}),
+      key("outbox", &M::outbox, Integer<std::size_t>{16, 10'000'000}),
+      key("username", &M::username, Text<>{}),
+      refused_key<M>("password", "is never written in the configuration: use password_file or password_env"),
+      key("password_file", &M::password_file, PathText{}),
+      key("password_env", &M::password_env, Text<>{}, {.then = check_broker_password}),
+      key("ca_file", &M::ca_file, PathText{}, {.then = check_ca_file}),
+      key("client_id", &M::client_id, Text<>{.non_empty = true}, {.then = default_client_id}),
+      key("protocol_version", &M::protocol_version, Choice<int>{{{"3.1.1", 4}, {"5", 5}}}),
+  };
 }
 
-OutputsConfig read_outputs(TomlTable& t) {
-  OutputsConfig outputs;
-  outputs.plotjuggler = read_endpoint(t, "plotjuggler");
-  outputs.line_streams = read_endpoints(t, "line_streams");
-  if (auto n = t.integer("decimation", 1, 1'000'000)) outputs.decimation = static_cast<std::uint32_t>(*n);
-  if (auto mqtt = t.table("mqtt")) outputs.mqtt = read_mqtt(*mqtt);
-  if (auto foxglove = t.table("foxglove")) outputs.foxglove = read_foxglove(*foxglove);
-  t.finish();
-  return outputs;
+KeyTable<FoxgloveConfig> foxglove_keys() {
+  using F = FoxgloveConfig;
+  return {
+      key("listen", &F::listen, ListenAddress{}),
+      key("sample_hz", &F::sample_hz, Number{0, 100'000}),
+      key("estimate_hz", &F::estimate_hz, Number{0, 100'000}),
+      key("queue", &F::queue, Integer<std::size_t>{16, 10'000'000}),
+      key("client_queue_kib", &F::client_queue_bytes, Kibibytes{16, 1'048'576}),
+  };
 }
 
-SyncConfig read_sync(TomlTable& t) {
-  SyncConfig sync;
-  const auto to = t.string("to");
-  if (!to) t.fail("", "needs 'to', the archive's URL: postgresql://USER@HOST[:PORT]/DATABASE");
-  if (!to->starts_with("postgresql://") && !to->starts_with("postgres://")) {
+KeyTable<OutputsConfig> outputs_keys() {
+  using O = OutputsConfig;
+  return {
+      key("plotjuggler", &O::plotjuggler, EndpointText{}),
+      key("line_streams", &O::line_streams, EndpointTexts{}),
+      key("decimation", &O::decimation, Integer<std::uint32_t>{1, 1'000'000}),
+      key("mqtt", &O::mqtt, Table<MqttConfig>{mqtt_keys()}),
+      key("foxglove", &O::foxglove, Table<FoxgloveConfig>{foxglove_keys()}),
+  };
+}
+
+KeyTable<StoreConfig> store_keys() {
+  using S = StoreConfig;
+  return {
+      key("path", &S::path, PathText{}),
+      key("commit_interval_ms", &S::commit_interval, WholeDuration<std::chrono::milliseconds>{1, 60'000}),
+      key("max_size_mib", &S::max_size_bytes, Mebibytes{.max = 1e9, .zero_or_at_least_one = true}),
+      key("min_free_mib", &S::min_free_bytes, Mebibytes{.max = 1e9}),
+      key("on_full", &S::on_full, Choice<S::OnFull>{{{"rotate", S::OnFull::rotate}, {"stop", S::OnFull::stop}}}),
+  };
+}
+
+void check_archive_scheme(TomlTable& t, SyncConfig& sync) {
+  if (!sync.to.starts_with("postgresql://") && !sync.to.starts_with("postgres://")) {
     t.fail("to", "must be a postgresql:// URL");
   }
-  if (archive::redact_url(*to) != *to || t.find("password")) {
-    t.fail(t.find("password") ? "password" : "to",
-           "holds a password, which is never written in the configuration: use password_file or password_env");
-  }
-  sync.to = *to;
-  sync.station = t.string("station").value_or("");
-  if (auto s = t.integer("interval_s", 1, 86'400)) sync.interval = std::chrono::seconds(*s);
-  if (auto chunks = t.boolean("chunks")) sync.chunks = *chunks;
-  if (auto file = t.string("password_file")) sync.password_file = *file;
-  sync.password_env = t.string("password_env");
-  if (sync.password_file && sync.password_env) t.fail("password_env", "and password_file: give one of them");
-  t.finish();
-  return sync;
+}
+// The archive's URL holds no password, and neither does a 'password' key: the configuration is recorded with every
+// session. The row of 'password', read after 'to'.
+void refuse_archive_password(TomlTable& t, SyncConfig& sync) {
+  const char* why = "holds a password, which is never written in the configuration: use password_file or password_env";
+  if (t.find("password")) t.fail("password", why);
+  if (archive::redact_url(sync.to) != sync.to) t.fail("to", why);
+}
+// Empty: the host's name, found when syncing.
+bool has_station(const SyncConfig& sync) { return !sync.station.empty(); }
+
+KeyTable<SyncConfig> sync_keys() {
+  using S = SyncConfig;
+  return {
+      key("to", &S::to, Text<>{},
+          {.required = "needs 'to', the archive's URL: postgresql://USER@HOST[:PORT]/DATABASE",
+           .then = check_archive_scheme}),
+      {.name = "password", .read = refuse_archive_password},
+      key("station", &S::station, Text<>{}, {.written = has_station}),
+      key("interval_s", &S::interval, WholeDuration<std::chrono::seconds>{1, 86'400}),
+      key("chunks", &S::chunks, Flag{}),
+      key("password_file", &S::password_file, PathText{}),
+      key("password_env", &S::password_env, Text<>{}, {.then = one_password_source<S>}),
+  };
+}
+
+KeyTable<VehicleFeedbackConfig> feedback_keys() {
+  using V = VehicleFeedbackConfig;
+  return {
+      key("enabled", &V::enabled, Flag{}),
+      key("rate_hz", &V::rate_hz, Number{0.01, 1000}),
+      key("xbee_destination64", &V::xbee_destination64, HexAddress{}),
+  };
+}
+
+void check_link_named(TomlTable& t, LinkConfig& link) {
+  if (link.name.empty()) t.fail("", "needs a 'name'");
+}
+// The GCS identity is only used to request rates, so it is written only with them.
+bool requests_rates(const LinkConfig& link) { return !link.request_rates.empty(); }
+
+KeyTable<LinkConfig> link_keys() {
+  using L = LinkConfig;
+  using std::chrono::milliseconds;
+  return {
+      key("name", &L::name, Text<>{}, {.then = check_link_named}),
+      special_key("device", &L::device, read_device_selector, write_device_selector),  // or 'usb'
+      key("protocol", &L::format, WireFormatName{}),
+      key("baud", &L::baud, BaudRate{}),
+      key("calibration", &L::calibration, CalibrationTable{}),
+      key("axes", &L::axes, ImuAxesText{}),
+      key("imu", &L::imu, ImuMessageName{}),
+      key("imu_id", &L::imu_id, Integer<std::uint8_t>{0, 255}),
+      key("request_rates", &L::request_rates, RequestRates{}, {.written = requests_rates}),
+      key("gcs_sysid", &L::gcs_sysid, Integer<std::uint8_t>{1, 255}, {.written = requests_rates}),
+      key("gcs_compid", &L::gcs_compid, Integer<std::uint8_t>{0, 255}, {.written = requests_rates}),
+      key("bridge", &L::bridge, EndpointTexts{}),
+      // A [link.feedback] table enables feedback unless it says otherwise.
+      key("feedback", &L::feedback, Table<VehicleFeedbackConfig>{feedback_keys(), {.enabled = true}}),
+      key("reconnect_min_ms", &L::reconnect_min, WholeDuration<milliseconds>{1, 3'600'000}),
+      key("reconnect_max_ms", &L::reconnect_max, WholeDuration<milliseconds>{1, 3'600'000}),
+  };
+}
+
+// Every key of the file: parse_config() reads these rows and to_toml() writes them.
+const KeyTable<Config>& config_keys() {
+  using C = Config;
+  static const KeyTable<Config> keys{
+      key("log_level", &C::log_level,
+          Choice<std::string>{
+              {{"trace", "trace"}, {"debug", "debug"}, {"info", "info"}, {"warn", "warn"}, {"error", "error"}}}),
+      key("log_file", &C::log_file, PathText{}),
+      key("stats_interval_s", &C::stats_interval, WholeDuration<std::chrono::seconds>{1, 86'400}),
+      key("params", &C::params, PathText{}),
+      key("store", &C::store, Table<StoreConfig>{store_keys()}),
+      key("outputs", &C::outputs, Table<OutputsConfig>{outputs_keys()}),
+      key("sync", &C::sync, Table<SyncConfig>{sync_keys()}),
+      key("link", &C::links, TableArray<LinkConfig>{link_keys()}),
+  };
+  return keys;
 }
 
 std::string source_prefix(std::string_view source) {
@@ -357,29 +522,7 @@ Config parse_config(std::string_view toml_text, std::string_view source) {
   }
   TomlTable t(root, "", source);
   Config config;
-  if (auto level = t.choice<std::string>(
-          "log_level",
-          {{"trace", "trace"}, {"debug", "debug"}, {"info", "info"}, {"warn", "warn"}, {"error", "error"}})) {
-    config.log_level = *level;
-  }
-  if (auto file = t.string("log_file")) config.log_file = *file;
-  if (auto s = t.integer("stats_interval_s", 1, 86'400)) config.stats_interval = std::chrono::seconds(*s);
-  if (auto params = t.string("params")) config.params = *params;
-  if (auto store = t.table("store")) config.store = read_store(*store);
-  if (auto outputs = t.table("outputs")) config.outputs = read_outputs(*outputs);
-  if (auto sync = t.table("sync")) config.sync = read_sync(*sync);
-  if (const toml::node* links = t.find("link")) {
-    const toml::array* array = links->as_array();
-    // No links: `link = []`, as to_toml() writes it; toml++ does not count an empty array as one of tables.
-    if (!array || !(array->empty() || array->is_array_of_tables())) {
-      t.fail("link", "must be an array of tables: write [[link]]");
-    }
-    for (std::size_t i = 0; i < array->size(); ++i) {
-      TomlTable link(*array->get(i)->as_table(), "link[" + std::to_string(i) + "]", source);
-      config.links.push_back(read_link(link));
-    }
-  }
-  t.finish();
+  read_keys(t, config_keys(), config);
   validate_links(config, source);  // links may also come from the command line: their number is checked later
   return config;
 }
@@ -442,100 +585,17 @@ void validate_links(const Config& config, std::string_view source) {
 }
 
 std::string to_toml(const Config& config) {
-  toml::table root;
-  root.insert("log_level", config.log_level);
-  if (config.log_file) root.insert("log_file", config.log_file->string());
-  root.insert("stats_interval_s", static_cast<std::int64_t>(config.stats_interval.count()));
-  if (config.params) root.insert("params", config.params->string());
-
-  const StoreConfig& s = config.store;
-  root.insert("store", toml::table{{"path", s.path.string()},
-                                   {"commit_interval_ms", static_cast<std::int64_t>(s.commit_interval.count())},
-                                   {"max_size_mib", static_cast<double>(s.max_size_bytes) / kMiB},
-                                   {"min_free_mib", static_cast<double>(s.min_free_bytes) / kMiB},
-                                   {"on_full", s.on_full == StoreConfig::OnFull::rotate ? "rotate" : "stop"}});
-
-  const auto endpoint_texts = [](const std::vector<Endpoint>& endpoints) {
-    toml::array texts;
-    for (const auto& e : endpoints) texts.push_back(e.text);
-    return texts;
-  };
-  toml::table outputs{{"line_streams", endpoint_texts(config.outputs.line_streams)},
-                      {"decimation", static_cast<std::int64_t>(config.outputs.decimation)}};
-  if (config.outputs.plotjuggler) outputs.insert("plotjuggler", config.outputs.plotjuggler->text);
-  if (const auto& m = config.outputs.mqtt) {
-    toml::table mqtt{{"url", m->url},
-                     {"station", m->station},
-                     {"qos", static_cast<std::int64_t>(m->qos)},
-                     {"sample_hz", m->sample_hz},
-                     {"keepalive_s", static_cast<std::int64_t>(m->keepalive.count())},
-                     {"reconnect_min_s", static_cast<std::int64_t>(m->reconnect_min.count())},
-                     {"reconnect_max_s", static_cast<std::int64_t>(m->reconnect_max.count())},
-                     {"outbox", static_cast<std::int64_t>(m->outbox)},
-                     {"client_id", m->client_id},
-                     {"protocol_version", m->protocol_version == 5 ? "5" : "3.1.1"}};
-    if (m->estimate_hz) mqtt.insert("estimate_hz", *m->estimate_hz);
-    if (m->username) mqtt.insert("username", *m->username);
-    if (m->password_file) mqtt.insert("password_file", m->password_file->string());
-    if (m->password_env) mqtt.insert("password_env", *m->password_env);
-    if (m->ca_file) mqtt.insert("ca_file", m->ca_file->string());
-    outputs.insert("mqtt", std::move(mqtt));
-  }
-  if (const auto& f = config.outputs.foxglove) {
-    toml::table foxglove{{"listen", f->listen.text},
-                         {"queue", static_cast<std::int64_t>(f->queue)},
-                         {"client_queue_kib", static_cast<std::int64_t>(f->client_queue_bytes / 1024)}};
-    if (f->sample_hz) foxglove.insert("sample_hz", *f->sample_hz);
-    if (f->estimate_hz) foxglove.insert("estimate_hz", *f->estimate_hz);
-    outputs.insert("foxglove", std::move(foxglove));
-  }
-  root.insert("outputs", std::move(outputs));
-  if (const auto& y = config.sync) {
-    toml::table sync{
-        {"to", y->to}, {"interval_s", static_cast<std::int64_t>(y->interval.count())}, {"chunks", y->chunks}};
-    if (!y->station.empty()) sync.insert("station", y->station);
-    if (y->password_file) sync.insert("password_file", y->password_file->string());
-    if (y->password_env) sync.insert("password_env", *y->password_env);
-    root.insert("sync", std::move(sync));
-  }
-
-  toml::array links;
-  for (const LinkConfig& l : config.links) {
-    toml::table link{
-        {"name", l.name},
-        {"protocol", std::string(protocol::wire_format_name(l.format))},
-        {"baud", static_cast<std::int64_t>(l.baud)},
-        {"axes", l.axes},
-        {"reconnect_min_ms", static_cast<std::int64_t>(l.reconnect_min.count())},
-        {"reconnect_max_ms", static_cast<std::int64_t>(l.reconnect_max.count())},
-        {"bridge", endpoint_texts(l.bridge)},
-        {"calibration", to_toml_table(pipeline::calibration_to_json(l.calibration))},
-        {"feedback", toml::table{{"enabled", l.feedback.enabled},
-                                 {"rate_hz", l.feedback.rate_hz},
-                                 {"xbee_destination64", protocol::hex(l.feedback.xbee_destination64, 8)}}}};
-    if (l.imu) link.insert("imu", *l.imu);
-    if (l.imu_id) link.insert("imu_id", static_cast<std::int64_t>(*l.imu_id));
-    if (!l.request_rates.empty()) {
-      toml::table rates;
-      for (const auto& [name, hz] : l.request_rates) rates.insert(name, hz);
-      link.insert("request_rates", std::move(rates));
-      link.insert("gcs_sysid", static_cast<std::int64_t>(l.gcs_sysid));
-      link.insert("gcs_compid", static_cast<std::int64_t>(l.gcs_compid));
-    }
-    if (l.device.usb_vid) {
-      toml::table usb{{"vid", static_cast<std::int64_t>(*l.device.usb_vid)},
-                      {"pid", static_cast<std::int64_t>(*l.device.usb_pid)}};
-      if (l.device.usb_serial) usb.insert("serial", *l.device.usb_serial);
-      link.insert("usb", std::move(usb));
-    } else {
-      link.insert("device", l.device.path.string());
-    }
-    links.push_back(std::move(link));
-  }
-  root.insert("link", std::move(links));
   std::ostringstream out;
-  out << root;
+  out << write_keys(config_keys(), config);
   return out.str();
+}
+
+std::vector<KeyComparison> compare_config_keys(const Config& a, const Config& b) {
+  std::vector<KeyComparison> keys;
+  compare_keys(config_keys(), a, b, "", [&](const std::string& path, bool equal, bool first_is_default) {
+    keys.push_back({.path = path, .equal = equal, .first_is_default = first_is_default});
+  });
+  return keys;
 }
 
 std::optional<std::uint32_t> mavlink_imu_msgid(std::string_view name) {

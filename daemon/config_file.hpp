@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "daemon/config.hpp"
 #include "pipeline/link_decoder.hpp"
@@ -26,6 +27,15 @@ Config load_config(const std::filesystem::path& path);
 
 // The configuration as TOML that parse_config() reads back to the same Config: the session's config snapshot.
 std::string to_toml(const Config& config);
+
+// One key of the file in two configurations, compared through the table parse_config() and to_toml() share: for the
+// test that every key survives to_toml() and parse_config(). Keys of array elements are named once: "link[].baud".
+struct KeyComparison {
+  std::string path;
+  bool equal;             // the two hold the same value
+  bool first_is_default;  // the first holds its struct's default
+};
+std::vector<KeyComparison> compare_config_keys(const Config& a, const Config& b);
 
 // The line speeds a serial link can be set to: the termios B* rates Boost.Asio's serial_port knows on Linux, from 50
 // to 4000000. Any other rate would pass here and then fail at every reconnect, so it is refused with the

@@ -4,7 +4,10 @@
 
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "daemon/config_file.hpp"
 #include "daemon/link_spec.hpp"
@@ -333,6 +336,105 @@ TEST(ConfigFile, TheSnapshotOfAConfigurationWithoutLinksReadsBack) {
   const std::string text = to_toml(parse_config("", "empty.toml"));
   EXPECT_NE(text.find("link = []"), std::string::npos) << text;
   EXPECT_EQ(to_toml(parse_config(text, "snapshot")), text);
+}
+
+// Between them, these set every key of the file to something other than its default (password_file and
+// password_env exclude each other, hence two).
+const std::vector<std::string> kEveryKeySet = {R"(
+log_level = "warn"
+log_file = "/var/log/imubridge.log"
+stats_interval_s = 7
+params = "p.json"
+[store]
+path = "/data/flights.db"
+commit_interval_ms = 150
+max_size_mib = 2.5
+min_free_mib = 64
+on_full = "stop"
+[outputs]
+plotjuggler = "udp://127.0.0.1:9870"
+line_streams = ["tcp-listen://127.0.0.1:9871"]
+decimation = 3
+[outputs.mqtt]
+url = "mqtts://broker.lab:8884"
+station = "field-1"
+qos = 1
+sample_hz = 20
+estimate_hz = 5
+keepalive_s = 45
+reconnect_min_s = 2
+reconnect_max_s = 60
+outbox = 100
+username = "gs"
+password_file = "/etc/imubridge/mqtt.pass"
+ca_file = "/etc/ssl/lab-ca.pem"
+client_id = "gs-field-1"
+protocol_version = "5"
+[outputs.foxglove]
+listen = "[::]:9000"
+sample_hz = 25
+estimate_hz = 0
+queue = 100
+client_queue_kib = 256
+[sync]
+to = "postgresql://gs@archive.lab/fleet"
+station = "gs1"
+interval_s = 10
+chunks = true
+password_env = "ARCHIVE_PASSWORD"
+[[link]]
+name = "fc"
+device = "/dev/ttyACM0"
+protocol = "mavlink"
+baud = 921600
+axes = "frd"
+imu = "HIGHRES_IMU"
+imu_id = 1
+request_rates = { HIGHRES_IMU = 200 }
+gcs_sysid = 250
+gcs_compid = 191
+bridge = ["udp://127.0.0.1:14550"]
+reconnect_min_ms = 50
+reconnect_max_ms = 800
+[link.calibration]
+temperature_offset_c = 21.5
+[[link]]
+name = "radio"
+usb = { vid = 0x0403, pid = 0x6015, serial = "DN02ABCD" }
+protocol = "xbee"
+[link.feedback]
+enabled = true
+rate_hz = 2.5
+xbee_destination64 = "0013A20040A1B2C3"
+)",
+                                               R"(
+[outputs.mqtt]
+url = "mqtt://broker.lab"
+station = "field-2"
+username = "gs"
+password_env = "MQTT_PASSWORD"
+[sync]
+to = "postgresql://gs@archive.lab/fleet"
+password_file = "/etc/imubridge/archive.pass"
+)"};
+
+// parse_config() and to_toml() share one table of keys; this holds every row of it to both directions, so a key
+// added to the table is read and written back, or this fails naming it.
+TEST(ConfigFile, EveryKeyOfTheTableSurvivesTheSnapshot) {
+  std::set<std::string> keys, set_by_a_sample;
+  for (const std::string& sample : kEveryKeySet) {
+    const Config original = parse_config(sample, "sample.toml");
+    const Config copy = parse_config(to_toml(original), "snapshot");
+    for (const KeyComparison& key : compare_config_keys(original, copy)) {
+      keys.insert(key.path);
+      EXPECT_TRUE(key.equal) << key.path << " is not the same after to_toml() and parse_config()";
+      if (!key.first_is_default) set_by_a_sample.insert(key.path);
+    }
+  }
+  EXPECT_TRUE(keys.contains("link[].feedback.rate_hz") && keys.contains("outputs.mqtt.client_id")) << "nested keys";
+  for (const std::string& key : keys) {
+    EXPECT_TRUE(set_by_a_sample.contains(key)) << key << ": set it to other than its default in kEveryKeySet";
+  }
 }
 
 TEST(LinkSpec, PathsUsbIdentitiesProtocolsAndBaudRates) {
