@@ -60,6 +60,15 @@ TEST(TransferOffset, TheLiveFilterCountsTheMeasuredOffsetOnAnotherFlightOnly) {
   EXPECT_EQ(config_for(params).wind_std, 0.0);  // its own flight's wind went into the fit
 }
 
+TEST(TransferOffset, AFitFromTheImuAloneDidNotPlaceTheOffsetEvenOnItsOwnFlight) {
+  ModelParams params;
+  params.full.drag_linear = {0.3, 0.3};
+  EXPECT_EQ(config_for(params).accel_offset_std, 0.0);  // fitted against a reference: the fit placed the offset
+  params.identification.process_noise = 0.8;            // the filter error method: fitted from the IMU alone
+  EXPECT_EQ(config_for(params).accel_offset_std, kTransferredOffsetStd);
+  EXPECT_EQ(config_for(params).wind_std, 0.0);  // the flight's own wind is in what the drag reads, as in the fit
+}
+
 TEST(TransferOffset, RefusesFlightsItCannotScore) {
   const ModelParams params = calibration();
   ImuSeries without = paper_flight(4);
