@@ -70,29 +70,6 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
 
 // Why the parameters [first, end) of a fit are not determined by the data, or nullopt: a standard error that cannot
 // be computed, or standard errors as large as the values themselves (the data cannot tell the effect from none).
-// Which candidates the step may take when judged by the flight: those passing every rule whose validation velocity
-// (with the reference) or likelihood (from the IMU alone) is within flight_tolerance of the best of them. Without the
-// flight's rules, every candidate that passes.
-std::vector<bool> flying_best(const std::vector<CandidateTrial>& trials, bool judged_by_velocity,
-                              const DiagnoseOptions& options) {
-  std::vector<bool> out(trials.size());
-  const auto flight = [&](const CandidateTrial& t) -> std::optional<double> {
-    // Larger is better for both: the velocity's RMSE negated.
-    if (judged_by_velocity) return t.velocity_validation ? std::optional(-*t.velocity_validation) : std::nullopt;
-    return t.likelihood_validation;
-  };
-  std::optional<double> best;
-  for (const CandidateTrial& t : trials) {
-    if (t.significant && flight(t) && (!best || *flight(t) > *best)) best = flight(t);
-  }
-  for (std::size_t i = 0; i < trials.size(); ++i) {
-    const std::optional<double> f = flight(trials[i]);
-    out[i] = trials[i].significant &&
-             (!options.judge_by_flight || !best || !f || *f >= *best - options.flight_tolerance * std::abs(*best));
-  }
-  return out;
-}
-
 std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
   double value_norm = 0.0, error_norm = 0.0;
   for (std::size_t i = first; i < fit.values.size(); ++i) {
@@ -112,6 +89,39 @@ std::optional<std::string> undetermined(const Model& model, const FitOutcome& fi
                 "the data cannot tell it from none",
                 std::sqrt(error_norm), std::sqrt(value_norm));
   return why;
+}
+
+// What users fly with, larger the better: the validation velocity's RMSE negated (with the reference), else the
+// filter's validation log-likelihood; nullopt when the model gives none.
+std::optional<double> flight_score(const std::optional<double>& velocity, const std::optional<double>& likelihood,
+                                   bool judged_by_velocity) {
+  if (judged_by_velocity) return velocity ? std::optional(-*velocity) : std::nullopt;
+  return likelihood;
+}
+
+// Whether a model scoring `score` flies no worse than one scoring `reference`: within flight_tolerance of its size,
+// which one validation window cannot tell apart (DiagnoseOptions::flight_tolerance).
+bool flies_no_worse(double score, double reference, const DiagnoseOptions& options) {
+  return score >= reference - options.flight_tolerance * std::abs(reference);
+}
+
+// Which candidates the step may take when judged by the flight: those passing every rule that fly no worse than the
+// best of them. Without the flight's rules, every candidate that passes.
+std::vector<bool> flying_best(const std::vector<CandidateTrial>& trials, bool judged_by_velocity,
+                              const DiagnoseOptions& options) {
+  const auto score = [&](const CandidateTrial& t) {
+    return flight_score(t.velocity_validation, t.likelihood_validation, judged_by_velocity);
+  };
+  std::optional<double> best;
+  for (const CandidateTrial& t : trials) {
+    if (t.significant && score(t) && (!best || *score(t) > *best)) best = score(t);
+  }
+  std::vector<bool> out(trials.size());
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    const std::optional<double> f = score(trials[i]);
+    out[i] = trials[i].significant && (!options.judge_by_flight || !best || !f || flies_no_worse(*f, *best, options));
+  }
+  return out;
 }
 
 // The current model: its effects, fitted values and what they give.
@@ -357,11 +367,20 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   // The model as the live estimator will run it, what it does for the velocity (with a reference) or how likely the
   // filter finds the accelerometer with it (from the IMU alone), and whether it is plausible.
   const bool judged_by_velocity = setup.velocity == VelocitySource::reference;
-  const auto judge = [&](const Model& model, State& state) {
+  // `flown_as`: the model users would fly instead, for a model whose last effect the live estimator does not run (a
+  // vibration line is noise to it): its velocity and likelihood are that model's, not those of a filter told the
+  // residual it leaves is smaller than what it will be given.
+  const auto judge = [&](const Model& model, State& state, const State* flown_as = nullptr) {
     state.params = live_params(model, state.fit.values, state.fit.std_errors);
     record_fit(state.params, model, state.fit.values, train, validation);
-    state.summary.velocity = estimator::score_velocity(series, state.params, windows);
-    if (!judged_by_velocity) state.summary.likelihood = estimator::filter_log_likelihood(series, state.params, windows);
+    if (flown_as != nullptr) {
+      state.summary.velocity = flown_as->summary.velocity;
+      state.summary.likelihood = flown_as->summary.likelihood;
+    } else {
+      state.summary.velocity = estimator::score_velocity(series, state.params, windows);
+      if (!judged_by_velocity)
+        state.summary.likelihood = estimator::filter_log_likelihood(series, state.params, windows);
+    }
     state.summary.implausible.clear();
     state.implausible_limits.clear();
     for (const estimator::Implausibility& i : estimator::check_plausibility(state.params.full, options.limits)) {
@@ -509,13 +528,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
           return {trial, std::nullopt};
         }
         State candidate = settle(model, std::move(best), train, validation);
-        judge(model, candidate);
-        if (estimator::live_effect_refusal(effect.name())) {
-          // The live estimator does not run it (a vibration line is noise to it): what users fly with is the current
-          // model's, not that of a filter told the residual it leaves is smaller than what it will be given.
-          candidate.summary.velocity = current.summary.velocity;
-          candidate.summary.likelihood = current.summary.likelihood;
-        }
+        judge(model, candidate, estimator::live_effect_refusal(effect.name()) ? &current : nullptr);
         trial.rmse_train = candidate.summary.rmse_train;
         trial.rmse_validation = candidate.summary.rmse_validation;
         if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;
@@ -549,6 +562,7 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         current.summary.velocity ? std::optional(current.summary.velocity->validation.horizontal) : std::nullopt;
     const std::optional<double> likelihood_before =
         current.summary.likelihood ? std::optional(current.summary.likelihood->validation) : std::nullopt;
+    const std::optional<double> flight_before = flight_score(velocity_before, likelihood_before, judged_by_velocity);
     std::size_t tried = 0;
     double level = options.significance;
     // Fits `untried` on every core at once, kept in library order so that the outcome does not depend on which
@@ -581,22 +595,19 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
         const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
         const bool passes_f_test = t.p_value < level;
         // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
-        const bool flies_better =
-            !options.judge_by_flight ? true
-            : judged_by_velocity     ? !(velocity_before && t.velocity_validation) ||
-                                       *t.velocity_validation <= (1.0 + options.flight_tolerance) * *velocity_before
-                                 : !(likelihood_before && t.likelihood_validation) ||
-                                       *t.likelihood_validation >=
-                                           *likelihood_before - options.flight_tolerance * std::abs(*likelihood_before);
-        t.significant = improves && passes_f_test && flies_better;
+        const std::optional<double> score =
+            flight_score(t.velocity_validation, t.likelihood_validation, judged_by_velocity);
+        const bool no_worse_flown =
+            !options.judge_by_flight || !(flight_before && score) || flies_no_worse(*score, *flight_before, options);
+        t.significant = improves && passes_f_test && no_worse_flown;
         char why[260];
         t.rejected_by.clear();
-        if (improves && passes_f_test && !flies_better && judged_by_velocity) {
+        if (improves && passes_f_test && !no_worse_flown && judged_by_velocity) {
           std::snprintf(why, sizeof why,
                         "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
                         *velocity_before, *t.velocity_validation);
           t.rejected_by = why;
-        } else if (improves && passes_f_test && !flies_better) {
+        } else if (improves && passes_f_test && !no_worse_flown) {
           std::snprintf(why, sizeof why,
                         "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
                         "must not lower it)",

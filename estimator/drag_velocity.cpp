@@ -37,19 +37,16 @@ bool finite(const ImuSample& s) { return std::isfinite(s.t) && s.gyro.allFinite(
 
 DragVelocityConfig config_for(const ModelParams& params, DragVelocityConfig base) {
   if (params.identification.process_noise > 0.0) base.accel_process_noise = params.identification.process_noise;
-  if (!params.transferred && params.identification.process_noise > 0.0) {
-    // Fitted from the IMU alone (the filter error method fits the process noise): on a steady heading nothing in the
-    // IMU places the accelerometer's offset, so even on the flight it was fitted on the fit did not place it.
-    base.accel_offset_std = std::max(base.accel_offset_std, kTransferredOffsetStd);
-  }
   if (params.transferred) {
     // Measured on the flights that validated the calibration when it was (params.hpp), else a MEMS datasheet's.
     base.accel_offset_std =
         std::max(base.accel_offset_std, params.identification.transfer_offset_std.value_or(kTransferredOffsetStd));
     // A measured offset std already counts the wind: it is what made the validating flights' NEES honest.
-    if (!params.identification.transfer_offset_std) {
-      base.wind_std = std::max(base.wind_std, kTransferredWindStd);
-    }
+    if (!params.identification.transfer_offset_std) base.wind_std = std::max(base.wind_std, kTransferredWindStd);
+  } else if (params.identification.process_noise > 0.0) {
+    // Fitted from the IMU alone (the filter error method fits the process noise): on a steady heading nothing in the
+    // IMU places the accelerometer's offset, so even on the flight it was fitted on the fit did not place it.
+    base.accel_offset_std = std::max(base.accel_offset_std, kTransferredOffsetStd);
   }
   const auto& rmse = params.identification.rmse;
   // The channels an identification writes: the 3-D model's, else the paper's two axes (from which `full` derives).

@@ -150,16 +150,15 @@ struct VelocityErrorSum {
   Eigen::Vector2d squares = Eigen::Vector2d::Zero();
   std::size_t count = 0;
   void add(const Eigen::Vector2d& error) { sums += error, squares += error.cwiseAbs2(), ++count; }
-  Eigen::Vector2d mean() const { return sums / static_cast<double>(std::max<std::size_t>(count, 1)); }
-  VelocityError rmse() const {
-    const Eigen::Vector2d mean_square = squares / static_cast<double>(std::max<std::size_t>(count, 1));
-    return {mean_square.cwiseSqrt(), std::sqrt(mean_square.sum())};
-  }
+  Eigen::Vector2d mean() const { return sums / samples(); }
+  VelocityError rmse() const { return root(squares / samples()); }
   // The RMSE about the mean error: what is left once the window's constant error is taken out.
-  VelocityError rmse_about_mean() const {
-    const Eigen::Vector2d variance =
-        (squares / static_cast<double>(std::max<std::size_t>(count, 1)) - mean().cwiseAbs2()).cwiseMax(0.0);
-    return {variance.cwiseSqrt(), std::sqrt(variance.sum())};
+  VelocityError rmse_about_mean() const { return root((squares / samples() - mean().cwiseAbs2()).cwiseMax(0.0)); }
+
+ private:
+  double samples() const { return static_cast<double>(std::max<std::size_t>(count, 1)); }
+  static VelocityError root(const Eigen::Vector2d& mean_square) {
+    return {mean_square.cwiseSqrt(), std::sqrt(mean_square.sum())};
   }
 };
 

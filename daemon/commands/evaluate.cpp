@@ -125,7 +125,8 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
                        {"eq12", to_json(e.eq12)},
                        {"zero", to_json(e.zero)},
                        {"estimator_constant_known", to_json(e.estimator_constant_known)}};
-    // The filter's constant error over the window, and above what it scores without it (a bound: needs the reference).
+    // The filter's mean error over the window; estimator_constant_known above is its RMSE without it (a bound: it
+    // needs the reference).
     out["estimator_mean_error_m_s"] = {e.estimator_mean_error.x(), e.estimator_mean_error.y()};
     // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
     out["estimator_nees"] = e.nees;
