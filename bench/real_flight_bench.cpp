@@ -1,10 +1,12 @@
 // identify and diagnose on the real EuRoC MH_01 flight, as docs/results.md runs them: the 3-D model, trained on the
 // first 40 % of the flight (found from the rotors' vibration) and validated on the rest, with the reference's
 // velocity and from the IMU alone (the filter error method); diagnose compares below 10 Hz. Wall time on all cores.
+// And the session's reading from the store that comes before identify's fit.
 // The flight is read from IMUBRIDGE_EUROC_DIR, default ../shared/data/real/euroc_mh01 beside the repository; without
 // it the benchmarks say so and skip.
 #include <benchmark/benchmark.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
@@ -28,23 +30,27 @@ std::filesystem::path euroc_dir() {
   return std::filesystem::path(IMUBRIDGE_SOURCE_DIR) / ".." / "shared" / "data" / "real" / "euroc_mh01";
 }
 
-// The flight, imported once, with its windows.
+// The flight, imported once (its store kept for the reading benchmark), with its windows.
 struct RealFlight {
   estimator::ImuSeries series;
   estimator::TimeWindow train, validate;
+  std::filesystem::path database;
+  std::int64_t session = 0;
 };
 
 const std::optional<RealFlight>& real_flight() {
+  static const ScratchDir scratch;
   static const std::optional<RealFlight> flight = []() -> std::optional<RealFlight> {
     const std::filesystem::path dir = euroc_dir();
     if (!std::filesystem::exists(dir / "mav0" / "imu0" / "data.csv")) return std::nullopt;
-    ScratchDir scratch;
     store::Store store(scratch.database());
     replay::EurocImportOptions options;
     options.dir = dir;
     options.reference = replay::ReferenceFile{dir / "MH_01_easy.txt", replay::ReferenceFormat::tum};
     const auto imported = replay::import_euroc(store, options);
     RealFlight out;
+    out.database = scratch.database();
+    out.session = imported.session;
     out.series =
         pipeline::read_session_series(store, imported.session, {.reference = pipeline::ReferenceUse::when_present})
             .series;
@@ -61,6 +67,16 @@ bool skip_without_flight(benchmark::State& state) {
   if (real_flight()) return false;
   state.SkipWithError(("no EuRoC MH_01 flight at " + euroc_dir().string() + " (set IMUBRIDGE_EUROC_DIR)").c_str());
   return true;
+}
+
+// The session read as identify reads it before fitting: samples and reference from a read-only store, the
+// reference's delay estimated (docs/performance.md, "Identification on a real flight").
+void ReadSession(benchmark::State& state) {
+  if (skip_without_flight(state)) return;
+  const store::Store store(real_flight()->database, {.read_only = true});
+  const pipeline::SessionSeriesOptions options{.reference = pipeline::ReferenceUse::when_present,
+                                               .estimate_reference_delay = true};
+  for (auto _ : state) benchmark::DoNotOptimize(pipeline::read_session_series(store, real_flight()->session, options));
 }
 
 void Identify(benchmark::State& state, estimator::VelocitySource velocity, bool hold_bias) {
@@ -89,6 +105,7 @@ void Diagnose(benchmark::State& state, diagnose::VelocitySource velocity) {
   for (auto _ : state) benchmark::DoNotOptimize(diagnose::run_diagnosis(real_flight()->series, options));
 }
 
+BENCHMARK(ReadSession)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(5);
 BENCHMARK_CAPTURE(Identify, FullReferenceBiasHeld, estimator::VelocitySource::reference, true)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()

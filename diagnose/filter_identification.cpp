@@ -104,7 +104,7 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
       if (effects[e]->adds_drag()) drag.push_back(i);
     }
   }
-  if (!drag.empty()) model.scan_drag_start(start, drag, train);
+  if (!drag.empty()) model.scan_drag_start(start, drag, train, cores());
   const FitOutcome fit = diagnose::fit(model, start, train, 50, FitStop::parameter_precision, cores());
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 

@@ -4,8 +4,12 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
+#include <cstring>
+#include <exception>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -187,8 +191,10 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
       for (std::size_t i = offsets_[e]; i < offsets_[e + 1]; ++i) input_parameter_[i] = true;
     }
   }
-  if (std::none_of(input_parameter_.begin(), input_parameter_.end(), [](bool b) { return b; }))
-    fixed_inputs_ = compute_inputs(std::vector<double>(parameters_.size(), 0.0), signals.size());
+  if (std::none_of(input_parameter_.begin(), input_parameter_.end(), [](bool b) { return b; })) {
+    bool plain_gyro = false;
+    compute_inputs(std::vector<double>(parameters_.size(), 0.0), signals.size(), fixed_inputs_.emplace(), plain_gyro);
+  }
 }
 
 const ModelInputs& Model::inputs_for(std::span<const double> p, std::size_t until) const {
@@ -198,7 +204,16 @@ const ModelInputs& Model::inputs_for(std::span<const double> p, std::size_t unti
     if (input_parameter_[i]) key.push_back(p[i]);
   }
   if (!cached_inputs_ || key != cached_key_ || cached_until_ < until) {
-    cached_inputs_ = compute_inputs(p, until);
+    // Refilled in place: the vectors keep their memory. A flight's worth of fresh pages for every evaluation of a
+    // Jacobian cost more than some of the evaluation itself.
+    ModelInputs& in = cached_inputs_ ? *cached_inputs_ : cached_inputs_.emplace();
+    try {
+      compute_inputs(p, until, in, cached_plain_gyro_);
+    } catch (...) {
+      cached_inputs_.reset();  // half refilled: no longer the inputs of cached_key_
+      cached_plain_gyro_ = false;
+      throw;
+    }
     cached_key_ = std::move(key);
     cached_until_ = until;
   }
@@ -207,29 +222,40 @@ const ModelInputs& Model::inputs_for(std::span<const double> p, std::size_t unti
 
 ModelInputs Model::inputs(std::span<const double> p) const { return inputs_for(p, signals().size()); }
 
-ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) const {
+double Model::gyro_inputs(std::span<const double> p, ModelInputs& in, bool& plain_gyro) const {
   const Signals& s = signals();
-  const std::span<const double> t = s.t;
-  const std::size_t n = s.size();
   const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
-  ModelInputs in;
-
-  // 1. gyro
-  in.gyro = s.gyro;
-  for (std::size_t i = 0; i < effects_.size(); ++i) {
-    if (effects_[i]->stages().gyro) effects_[i]->adjust_gyro(params_of(i), setup_, in.gyro);
-  }
-  in.gyro_rate = s.gyro_rate;
-
   // 2. timing: the accelerometer's sample at t saw the motion of t - tau.
   double tau = 0.0;
   for (std::size_t i = 0; i < effects_.size(); ++i) {
     if (effects_[i]->stages().timing) tau += effects_[i]->time_offset(params_of(i));
   }
-  if (tau != 0.0) {
-    in.gyro = delayed(t, in.gyro, tau);
-    in.gyro_rate = delayed(t, in.gyro_rate, tau);
+  // 1. gyro, then 2.'s shift. Unchanged, the signals' own gyro is not copied again into inputs that hold it.
+  const bool gyro_effects =
+      std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->stages().gyro; });
+  if (gyro_effects || tau != 0.0 || !plain_gyro) {
+    plain_gyro = false;
+    in.gyro = s.gyro;
+    for (std::size_t i = 0; i < effects_.size(); ++i) {
+      if (effects_[i]->stages().gyro) effects_[i]->adjust_gyro(params_of(i), setup_, in.gyro);
+    }
+    in.gyro_rate = s.gyro_rate;
+    if (tau != 0.0) {
+      in.gyro = delayed(std::span<const double>(s.t), in.gyro, tau);
+      in.gyro_rate = delayed(std::span<const double>(s.t), in.gyro_rate, tau);
+    }
   }
+  plain_gyro = !gyro_effects && tau == 0.0;
+  return tau;
+}
+
+void Model::compute_inputs(std::span<const double> p, std::size_t until, ModelInputs& in, bool& plain_gyro) const {
+  const Signals& s = signals();
+  const std::span<const double> t = s.t;
+  const std::size_t n = s.size();
+  const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
+  in.attitude.clear();                                // set below where the velocity source has one
+  const double tau = gyro_inputs(p, in, plain_gyro);  // stages 1 and 2
 
   // 3. velocity: the drag law of the base model and the effects, the wind, and drag in the dynamics or not.
   DragLaw law;
@@ -245,12 +271,21 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
     drag_in_dynamics = drag_in_dynamics || stages.drag_in_dynamics;
     measured_thrust = measured_thrust || stages.measured_thrust;
   }
-  in.thrust = measured_thrust ? s.thrust : std::vector<double>(n, kGravity);
+  // The same for every parameter: filled once into reused inputs.
+  if (in.thrust.size() != n) {
+    if (measured_thrust)
+      in.thrust = s.thrust;
+    else
+      in.thrust.assign(n, kGravity);
+  }
 
   if (setup_.velocity == VelocitySource::filter) {
     // Without drag the filter has nothing to fuse, and nothing in the model reads a velocity.
-    in.velocity = filter_runs() ? filter_velocity(p, until) : std::vector<Vector3d>(n, Vector3d::Zero());
-    return in;  // already the air velocity, in the filter's body axes
+    if (filter_runs())
+      filter_velocity(p, until, in.velocity);
+    else
+      in.velocity.assign(n, Vector3d::Zero());
+    return;  // already the air velocity, in the filter's body axes
   }
   if (setup_.velocity == VelocitySource::reference) {
     in.velocity = s.reference->velocity_body;
@@ -292,7 +327,6 @@ ModelInputs Model::compute_inputs(std::span<const double> p, std::size_t until) 
   if (!wind.isZero()) {
     for (std::size_t k = 0; k < n; ++k) in.velocity[k] -= in.attitude[k].conjugate() * wind;
   }
-  return in;
 }
 
 double Model::process_noise(std::span<const double> p) const {
@@ -313,7 +347,7 @@ bool Model::filter_runs() const {
           std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->adds_drag(); }));
 }
 
-std::vector<Vector3d> Model::filter_velocity(std::span<const double> p, std::size_t until) const {
+void Model::filter_velocity(std::span<const double> p, std::size_t until, std::vector<Vector3d>& velocity) const {
   const Signals& s = signals();
   // The model as the live estimator runs it (effects it cannot run, such as vibration, act after stage 3 only).
   estimator::FullModelParams params = live_params(*this, p).full;
@@ -330,8 +364,14 @@ std::vector<Vector3d> Model::filter_velocity(std::span<const double> p, std::siz
   const std::size_t delay = static_cast<std::size_t>(filter.delay_samples());
   // Block j's estimate comes delay_samples() blocks after it.
   const std::size_t blocks = until == 0 ? 0 : std::min(s.size() / block, (until - 1) / block + 1 + delay);
-  const std::vector<estimator::ImuSample> means = block_means(s.t, gyro, s.accel, block, blocks);
-  std::vector<Vector3d> velocity(s.size(), Vector3d::Zero());
+  // Without a time offset the block means are the same for every parameter: computed once (the longest run asked
+  // for is kept; a block's mean does not depend on how many are taken).
+  std::vector<estimator::ImuSample> shifted_means;
+  if (!shifted.empty()) shifted_means = block_means(s.t, gyro, s.accel, block, blocks);
+  if (shifted.empty() && block_means_.size() < blocks) block_means_ = block_means(s.t, gyro, s.accel, block, blocks);
+  const std::span<const estimator::ImuSample> means =
+      shifted.empty() ? std::span<const estimator::ImuSample>(block_means_).first(blocks) : shifted_means;
+  velocity.resize(s.size());  // every sample is written below: those before `until` here, the rest zeroed at the end
   // Every sample of block j takes the prediction for block j, made from the blocks before it; samples the filter
   // holds no estimate for (the first blocks, those a time offset's aligner waits on) keep the last prediction.
   std::size_t filled = 0;
@@ -350,29 +390,20 @@ std::vector<Vector3d> Model::filter_velocity(std::span<const double> p, std::siz
     filled = first + block;
   }
   hold_until(std::min(until, s.size()));
-  return velocity;
+  std::fill(velocity.begin() + static_cast<std::ptrdiff_t>(filled), velocity.end(), Vector3d::Zero());
 }
 
 Evaluation Model::evaluate(std::span<const double> p, Range range) const {
-  if (p.size() != parameters_.size()) throw std::invalid_argument("Model::evaluate: wrong number of parameters");
-  if (range.first + range.count > signals().size()) throw std::invalid_argument("Model::evaluate: range too long");
-  const ModelInputs& in = inputs_for(p, range.first + range.count);
-  const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
-  const std::size_t axes = setup_.axes.size();
+  Evaluation e;
+  evaluate_into(p, range, e);
+  return e;
+}
 
-  const std::span<const Vector3d> measured(signals().accel.data() + range.first, range.count);
-  // The effects' own drag (the paper's mu is inside eq. 14).
-  DragLaw effect_drag;
-  for (std::size_t i = 0; i < effects_.size(); ++i) {
-    if (effects_[i]->adds_drag()) effects_[i]->add_drag(params_of(i), setup_, effect_drag);
-  }
-
-  // The base model's predicted reading in IMU axes (the paper model fills the axes it diagnoses).
-  std::vector<Vector3d> predicted(range.count, Vector3d::Zero());
-  PredictionContext ctx{setup_, in, {}, Eigen::Matrix3d::Identity(), range.first, range.count};
-  estimator::FullModelParams full;
+void Model::predict_base(std::span<const double> p, Range range, const DragLaw& effect_drag, PredictionContext& ctx,
+                         std::vector<Vector3d>& predicted) const {
+  const ModelInputs& in = ctx.inputs;
   if (setup_.base == ModelKind::paper) {
-    for (std::size_t i = 0; i < axes; ++i) {
+    for (std::size_t i = 0; i < setup_.axes.size(); ++i) {
       const int axis = setup_.axes[i];
       const bool pitch = axis == 0;
       const estimator::PaperAxisParams params = paper_axis(p, i);
@@ -391,29 +422,54 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
             estimator::drag_specific_force(effect_drag.k[axis], effect_drag.mu[axis], in.velocity[j][axis]);
       }
     }
-  } else {
-    full.lever_arm = Vector3d(p[0], p[1], p[2]);
-    full.mounting = Vector3d(p[3], p[4], p[5]);
-    full.drag_linear = effect_drag.k;
-    full.drag_quadratic = effect_drag.mu;
-    ctx.imu_to_body = rotation(p.data() + 3);
-    for (std::size_t k = 0; k < range.count; ++k) {
-      const std::size_t j = range.first + k;
-      predicted[k] = estimator::predict_specific_force(full, ctx.imu_to_body,
-                                                       {.gyro = in.gyro[j],
-                                                        .gyro_rate = in.gyro_rate[j],
-                                                        .velocity = in.velocity[j].head<2>(),
-                                                        .thrust = in.thrust[j]});
-    }
+    return;
   }
+  estimator::FullModelParams full;
+  full.lever_arm = Vector3d(p[0], p[1], p[2]);
+  full.mounting = Vector3d(p[3], p[4], p[5]);
+  full.drag_linear = effect_drag.k;
+  full.drag_quadratic = effect_drag.mu;
+  ctx.imu_to_body = rotation(p.data() + 3);
+  for (std::size_t k = 0; k < range.count; ++k) {
+    const std::size_t j = range.first + k;
+    predicted[k] = estimator::predict_specific_force(full, ctx.imu_to_body,
+                                                     {.gyro = in.gyro[j],
+                                                      .gyro_rate = in.gyro_rate[j],
+                                                      .velocity = in.velocity[j].head<2>(),
+                                                      .thrust = in.thrust[j]});
+  }
+}
+
+void Model::evaluate_into(std::span<const double> p, Range range, Evaluation& e) const {
+  if (p.size() != parameters_.size()) throw std::invalid_argument("Model::evaluate: wrong number of parameters");
+  if (range.first + range.count > signals().size()) throw std::invalid_argument("Model::evaluate: range too long");
+  const ModelInputs& in = inputs_for(p, range.first + range.count);
+  const auto params_of = [&](std::size_t i) { return p.subspan(offsets_[i], offsets_[i + 1] - offsets_[i]); };
+  const std::size_t axes = setup_.axes.size();
+
+  const std::span<const Vector3d> measured(signals().accel.data() + range.first, range.count);
+  // The effects' own drag (the paper's mu is inside eq. 14).
+  DragLaw effect_drag;
+  for (std::size_t i = 0; i < effects_.size(); ++i) {
+    if (effects_[i]->adds_drag()) effects_[i]->add_drag(params_of(i), setup_, effect_drag);
+  }
+
+  // The base model's predicted reading in IMU axes (the paper model fills the axes it diagnoses).
+  std::vector<Vector3d>& predicted = predicted_scratch_;
+  predicted.assign(range.count, Vector3d::Zero());
+  PredictionContext ctx{setup_, in, {}, Eigen::Matrix3d::Identity(), range.first, range.count};
+  predict_base(p, range, effect_drag, ctx, predicted);
   // 4. sensor
   for (std::size_t i = 0; i < effects_.size(); ++i) {
     if (effects_[i]->stages().sensor) effects_[i]->adjust_sensor(params_of(i), setup_, predicted, measured);
   }
 
   // In the residual's frame: the paper model's sensor axes; the full model's body axes, where the thrust (unknown
-  // per sample) only has a z component, so rows x and y.
-  Evaluation e{AxisValues(axes, std::vector<double>(range.count)), AxisValues(axes, std::vector<double>(range.count))};
+  // per sample) only has a z component, so rows x and y. Every value is written below: no need to clear them.
+  for (AxisValues* values : {&e.measured, &e.predicted}) {
+    values->resize(axes);
+    for (std::vector<double>& axis : *values) axis.resize(range.count);
+  }
   // The band limit: both sides alike, so the residual is the model's error inside the band. The filter is linear, so
   // the measurement is low-passed once per range, in IMU axes, and rotated after.
   const std::span<const Vector3d> compared = setup_.lowpass_hz > 0.0 ? lowpassed_measurement(range) : measured;
@@ -432,7 +488,6 @@ Evaluation Model::evaluate(std::span<const double> p, Range range) const {
   if (setup_.lowpass_hz > 0.0) {
     for (std::size_t i = 0; i < axes; ++i) zero_phase_lowpass(e.predicted[i], setup_.lowpass_hz, signals().rate_hz);
   }
-  return e;
 }
 
 std::span<const Vector3d> Model::lowpassed_measurement(Range range) const {
@@ -451,7 +506,8 @@ std::span<const Vector3d> Model::lowpassed_measurement(Range range) const {
 }
 
 void Model::residuals(std::span<const double> p, Range range, double* out) const {
-  const Evaluation e = evaluate(p, range);
+  Evaluation& e = residual_scratch_;
+  evaluate_into(p, range, e);
   const std::size_t axes = e.measured.size();
   for (std::size_t k = 0; k < range.count; ++k) {
     for (std::size_t i = 0; i < axes; ++i) out[k * axes + i] = e.measured[i][k] - e.predicted[i][k];
@@ -511,13 +567,38 @@ std::vector<double> Model::base_start(Range range) const {
   return {p.begin(), p.begin() + static_cast<std::ptrdiff_t>(base_size_)};
 }
 
-void Model::scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range) const {
+void Model::scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range,
+                            unsigned threads) const {
+  constexpr std::size_t kStarts = std::size(kDragStarts);
+  std::array<double, kStarts> rmses{};
+  std::array<std::exception_ptr, kStarts> failed{};
+  // Each value's RMSE is its own filter run: the threads take the next value when free, each on a model of its own
+  // (a model's caches are not shared between threads), and the lowest is chosen in the values' order after (the
+  // first value's failure thrown, as one thread would).
+  std::atomic<std::size_t> next{0};
+  const auto work = [&](const Model& model) {
+    std::vector<double> trial = p;
+    for (std::size_t v = next++; v < kStarts; v = next++) {
+      for (std::size_t i : indices) trial[i] = std::clamp(kDragStarts[v], parameters_[i].lower, parameters_[i].upper);
+      try {
+        rmses[v] = model.rmse(trial, range);
+      } catch (...) {
+        failed[v] = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::unique_ptr<Model>> others;
+  std::vector<std::thread> helpers;
+  for (unsigned t = 1; t < std::min<std::size_t>(std::max(1u, threads), kStarts); ++t) {
+    others.push_back(std::make_unique<Model>(signals(), setup(), effects()));
+    helpers.emplace_back(work, std::cref(*others.back()));
+  }
+  work(*this);
+  for (std::thread& t : helpers) t.join();
   double best_rmse = std::numeric_limits<double>::infinity(), best = p.empty() ? 0.0 : p[indices.front()];
-  std::vector<double> trial = p;
-  for (double value : kDragStarts) {
-    for (std::size_t i : indices) trial[i] = std::clamp(value, parameters_[i].lower, parameters_[i].upper);
-    const double r = rmse(trial, range);
-    if (r < best_rmse) best_rmse = r, best = value;
+  for (std::size_t v = 0; v < kStarts; ++v) {
+    if (failed[v]) std::rethrow_exception(failed[v]);
+    if (rmses[v] < best_rmse) best_rmse = rmses[v], best = kDragStarts[v];
   }
   for (std::size_t i : indices) p[i] = std::clamp(best, parameters_[i].lower, parameters_[i].upper);
 }
@@ -552,7 +633,7 @@ class ForwardDifferenceCost final : public ceres::CostFunction {
  public:
   ForwardDifferenceCost(const Model& model, Range range, std::size_t parameters, std::size_t residuals,
                         unsigned threads)
-      : range_(range), parameters_(parameters), residuals_(residuals) {
+      : range_(range), parameters_(parameters), residuals_(residuals), columns_(parameters * residuals) {
     models_.push_back(&model);
     for (unsigned t = 1; t < std::max(1u, threads); ++t) {
       own_.push_back(std::make_unique<Model>(model.signals(), model.setup(), model.effects()));
@@ -563,40 +644,104 @@ class ForwardDifferenceCost final : public ceres::CostFunction {
   }
 
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    if (jacobians == nullptr || jacobians[0] == nullptr)
+      return ModelCost{models_.front(), range_}(parameters, residuals);
     const double* x = parameters[0];
-    if (!ModelCost{models_.front(), range_}(parameters, residuals)) return false;
-    if (jacobians == nullptr || jacobians[0] == nullptr) return true;
     double* jacobian = jacobians[0];  // row-major: residual i, parameter j at i * parameters + j
-    std::atomic<bool> finite{true};
-    const auto columns = [&](std::size_t worker) {
-      std::vector<double> shifted(x, x + parameters_), column(residuals_);
+    // r(x) is one more task beside the columns' r(x + h) (each kept in columns_ until r(x) is known), so that the
+    // threads share parameters + 1 evaluations instead of all waiting for r(x) first. Each takes the next task when
+    // it is free, so a core another process slows takes fewer; a task's result does not depend on which thread ran it.
+    // A task that throws or fails (a non-finite residual) stops the others; r(x)'s failure counts first, as when it
+    // was evaluated before the columns.
+    std::atomic<bool> going{true};
+    std::atomic<std::size_t> next{0};
+    std::vector<char> finite(parameters_ + 1, 1);
+    std::vector<std::exception_ptr> thrown(parameters_ + 1);
+    const auto tasks = [&](std::size_t worker) {
+      std::vector<double> shifted(x, x + parameters_);
       const double* shifted_blocks[] = {shifted.data()};
       const ModelCost cost{models_[worker], range_};
-      for (std::size_t j = worker; j < parameters_ && finite; j += models_.size()) {
-        const double step = std::max(std::sqrt(std::numeric_limits<double>::epsilon()), std::abs(x[j]) * 1e-6);
-        shifted[j] = x[j] + step;
-        if (!cost(shifted_blocks, column.data())) {
-          finite = false;
-          return;
+      for (std::size_t task = next++; task <= parameters_ && going; task = next++) {
+        const std::size_t j = task - 1;  // the column; task 0 is r(x)
+        try {
+          if (task > 0) shifted[j] = x[j] + step(x[j]);
+          finite[task] = task == 0 ? cost(parameters, residuals) : cost(shifted_blocks, &columns_[j * residuals_]);
+        } catch (...) {
+          thrown[task] = std::current_exception();
         }
-        shifted[j] = x[j];
-        const double one_over_step = 1.0 / step;
-        for (std::size_t i = 0; i < residuals_; ++i)
-          jacobian[i * parameters_ + j] = (column[i] - residuals[i]) * one_over_step;
+        if (!finite[task] || thrown[task]) going = false;
+        if (task > 0) shifted[j] = x[j];
       }
     };
     std::vector<std::thread> helpers;
-    for (std::size_t w = 1; w < models_.size(); ++w) helpers.emplace_back(columns, w);
-    columns(0);
+    for (std::size_t w = 1; w < models_.size(); ++w) helpers.emplace_back(tasks, w);
+    tasks(0);
     for (std::thread& t : helpers) t.join();
-    return finite;
+    if (thrown[0]) std::rethrow_exception(thrown[0]);
+    if (!finite[0]) return false;
+    for (const std::exception_ptr& e : thrown) {
+      if (e) std::rethrow_exception(e);
+    }
+    if (std::find(finite.begin(), finite.end(), 0) != finite.end()) return false;
+    std::vector<double> one_over_step(parameters_);
+    for (std::size_t j = 0; j < parameters_; ++j) one_over_step[j] = 1.0 / step(x[j]);
+    for (std::size_t i = 0; i < residuals_; ++i) {
+      double* row = jacobian + i * parameters_;
+      for (std::size_t j = 0; j < parameters_; ++j)
+        row[j] = (columns_[j * residuals_ + i] - residuals[i]) * one_over_step[j];
+    }
+    return true;
   }
 
  private:
+  static double step(double x) {
+    return std::max(std::sqrt(std::numeric_limits<double>::epsilon()), std::abs(x) * 1e-6);
+  }
+
   Range range_;
   std::size_t parameters_, residuals_;
+  mutable std::vector<double> columns_;  // r(x + h) of column j at j * residuals_, kept between evaluations
   std::vector<std::unique_ptr<Model>> own_;
   std::vector<const Model*> models_;  // the caller's first
+};
+
+// Ceres evaluates a bounded problem's points more than once: LM's projected line search takes the gradient (so the
+// Jacobian) at the candidate, the candidate's cost is evaluated again, and a successful step evaluates the Jacobian
+// there once more (trust_region_minimizer.cc); the covariance and the precision check evaluate the final point again.
+// A model's residuals are a deterministic function of the parameters, so the last point's residuals and Jacobian are
+// handed back, bit for bit what evaluating again would give, when the same parameters (to the bit) come back.
+// Single-threaded, as the solver runs it (num_threads 1).
+class LastPointCache final : public ceres::CostFunction {
+ public:
+  explicit LastPointCache(ceres::CostFunction* inner) : inner_(inner) {
+    *mutable_parameter_block_sizes() = inner->parameter_block_sizes();
+    set_num_residuals(inner->num_residuals());
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const std::size_t n = static_cast<std::size_t>(parameter_block_sizes().front());
+    const std::size_t m = static_cast<std::size_t>(num_residuals());
+    const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
+    const bool same = x_.size() == n && std::memcmp(x_.data(), parameters[0], n * sizeof(double)) == 0;
+    if (same && (jacobian_.size() == m * n || !want_jacobian)) {
+      std::copy(residuals_.begin(), residuals_.end(), residuals);
+      if (want_jacobian) std::copy(jacobian_.begin(), jacobian_.end(), jacobians[0]);
+      return true;
+    }
+    x_.clear();
+    if (!inner_->Evaluate(parameters, residuals, jacobians)) return false;
+    x_.assign(parameters[0], parameters[0] + n);
+    residuals_.assign(residuals, residuals + m);
+    if (want_jacobian)
+      jacobian_.assign(jacobians[0], jacobians[0] + m * n);
+    else
+      jacobian_.clear();
+    return true;
+  }
+
+ private:
+  std::unique_ptr<ceres::CostFunction> inner_;
+  mutable std::vector<double> x_, residuals_, jacobian_;  // x_ empty: nothing kept
 };
 
 class RecordCost final : public ceres::IterationCallback {
@@ -610,6 +755,34 @@ class RecordCost final : public ceres::IterationCallback {
  private:
   std::vector<double>& costs_;
 };
+
+// Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same), at
+// out.values, the problem's one parameter block.
+void standard_errors(ceres::Problem& problem, const Model& model, std::size_t residual_count, FitOutcome& out) {
+  const std::vector<Parameter>& params = model.parameters();
+  double* x = out.values.data();
+  out.std_errors.assign(params.size(), std::numeric_limits<double>::quiet_NaN());
+  double final_cost = 0.0;
+  problem.Evaluate(ceres::Problem::EvaluateOptions(), &final_cost, nullptr, nullptr, nullptr);
+  const double variance = 2.0 * final_cost / static_cast<double>(residual_count - params.size());
+  ceres::Covariance::Options covariance_options;
+  covariance_options.algorithm_type = ceres::DENSE_SVD;
+  covariance_options.num_threads = 1;
+  ceres::Covariance covariance(covariance_options);
+  const std::vector<const double*> blocks{x};
+  if (covariance.Compute(blocks, &problem)) {
+    Eigen::MatrixXd c(params.size(), params.size());
+    covariance.GetCovarianceBlock(x, x, c.data());  // symmetric: storage order does not matter
+    for (std::size_t i = 0; i < params.size(); ++i) {
+      if (!model.inert(i))
+        out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
+    }
+    const Eigen::VectorXd inverse_sd = c.diagonal().cwiseSqrt().cwiseInverse();
+    out.correlation = inverse_sd.asDiagonal() * c * inverse_sd.asDiagonal();
+  } else {
+    out.covariance_failure = "the Jacobian is rank-deficient: some parameters cannot be told apart with these data";
+  }
+}
 
 }  // namespace
 
@@ -635,7 +808,7 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
                                   ? static_cast<ceres::CostFunction*>(new ForwardDifferenceCost(
                                         model, range, params.size(), residual_count, jacobian_threads))
                                   : central_difference_cost(model, range, params.size(), residual_count);
-  problem.AddResidualBlock(cost, nullptr, x);
+  problem.AddResidualBlock(new LastPointCache(cost), nullptr, x);
   std::vector<int> held;
   for (std::size_t i = 0; i < params.size(); ++i) {
     if (model.inert(i)) held.push_back(static_cast<int>(i));
@@ -676,28 +849,7 @@ FitOutcome fit(const Model& model, std::vector<double> start, Range range, int m
     if (params[i].periodic) x[i] = std::remainder(x[i], 2.0 * std::numbers::pi);  // cost and Jacobian unchanged
   }
 
-  // Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same).
-  out.std_errors.assign(params.size(), std::numeric_limits<double>::quiet_NaN());
-  double final_cost = 0.0;
-  problem.Evaluate(ceres::Problem::EvaluateOptions(), &final_cost, nullptr, nullptr, nullptr);
-  const double variance = 2.0 * final_cost / static_cast<double>(residual_count - params.size());
-  ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  covariance_options.num_threads = 1;
-  ceres::Covariance covariance(covariance_options);
-  const std::vector<const double*> blocks{x};
-  if (covariance.Compute(blocks, &problem)) {
-    Eigen::MatrixXd c(params.size(), params.size());
-    covariance.GetCovarianceBlock(x, x, c.data());  // symmetric: storage order does not matter
-    for (std::size_t i = 0; i < params.size(); ++i) {
-      if (!model.inert(i))
-        out.std_errors[i] = std::sqrt(variance * c(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
-    }
-    const Eigen::VectorXd inverse_sd = c.diagonal().cwiseSqrt().cwiseInverse();
-    out.correlation = inverse_sd.asDiagonal() * c * inverse_sd.asDiagonal();
-  } else {
-    out.covariance_failure = "the Jacobian is rank-deficient: some parameters cannot be told apart with these data";
-  }
+  standard_errors(problem, model, residual_count, out);
   return out;
 }
 

@@ -75,21 +75,33 @@ class Model {
 
   // From the IMU alone (velocity `filter`) the drag sets the filter velocity's time constant, and a fit started far
   // from the right one settles in a basin of its own: sets parameters `indices` of `p` (all drag coefficients) to the
-  // one of kDragStarts with the lowest RMSE on `range`, the others held. One filter run per value.
-  void scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range) const;
+  // one of kDragStarts with the lowest RMSE on `range`, the others held. One filter run per value, shared among
+  // `threads` threads (the same choice on any number).
+  void scan_drag_start(std::vector<double>& p, std::span<const std::size_t> indices, Range range,
+                       unsigned threads = 1) const;
   // Decades spanning multirotors' drag, linear (1/s) and quadratic (1/m) alike.
   static constexpr double kDragStarts[] = {0.01, 0.03, 0.1, 0.3, 1.0, 3.0};
 
  private:
   // Stages 1-3 for samples [0, until) (velocity `filter` runs its filter only that far; the other sources fill
-  // everything).
-  ModelInputs compute_inputs(std::span<const double> p, std::size_t until) const;
+  // everything), into `in`, whose vectors are reused. `plain_gyro`: whether in.gyro and in.gyro_rate hold the
+  // signals' own (then they are not copied again when nothing changes them); updated.
+  void compute_inputs(std::span<const double> p, std::size_t until, ModelInputs& in, bool& plain_gyro) const;
+  // Stages 1 and 2 into in.gyro and in.gyro_rate (compute_inputs' plain_gyro); returns the time offset tau.
+  double gyro_inputs(std::span<const double> p, ModelInputs& in, bool& plain_gyro) const;
   // velocity `filter`: the drag-velocity filter run with the model at p from the series' first sample to `until`, on
-  // block means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation).
-  std::vector<Eigen::Vector3d> filter_velocity(std::span<const double> p, std::size_t until) const;
+  // block means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation), into
+  // `velocity` (resized to the series).
+  void filter_velocity(std::span<const double> p, std::size_t until, std::vector<Eigen::Vector3d>& velocity) const;
   // The inputs for p, recomputed only when a parameter they depend on changed: most of a numeric Jacobian's
   // evaluations perturb parameters that act after stage 3. Not thread-safe (the fit is single-threaded).
   const ModelInputs& inputs_for(std::span<const double> p, std::size_t until) const;
+  // evaluate() into `e`, whose vectors are reused (residuals() keeps one: a fit evaluates thousands of times).
+  void evaluate_into(std::span<const double> p, Range range, Evaluation& e) const;
+  // The base model's predicted reading (IMU axes) on `range` into `predicted` (zeros on entry); sets ctx's paper
+  // parameters or imu_to_body.
+  void predict_base(std::span<const double> p, Range range, const DragLaw& effect_drag, PredictionContext& ctx,
+                    std::vector<Eigen::Vector3d>& predicted) const;
 
   ModelSetup setup_;
   std::vector<const Effect*> effects_;
@@ -100,11 +112,18 @@ class Model {
   std::vector<bool> input_parameter_;        // which parameters stages 1-3 depend on
   mutable std::vector<double> cached_key_;   // their values for cached_inputs_
   mutable std::optional<ModelInputs> cached_inputs_;
-  mutable std::size_t cached_until_ = 0;  // cached_inputs_ hold samples [0, cached_until_)
+  mutable std::size_t cached_until_ = 0;    // cached_inputs_ hold samples [0, cached_until_)
+  mutable bool cached_plain_gyro_ = false;  // compute_inputs' plain_gyro for cached_inputs_
   // The measured specific force low-passed (IMU axes), per range evaluated: it does not depend on the parameters.
   // Not thread-safe either.
   std::span<const Eigen::Vector3d> lowpassed_measurement(Range range) const;
   mutable std::list<std::pair<Range, std::vector<Eigen::Vector3d>>> lowpassed_;  // a list: spans into it stay valid
+  // velocity `filter`: the filter's input, block means of the samples without a time offset (filter_velocity). Not
+  // thread-safe either.
+  mutable std::vector<estimator::ImuSample> block_means_;
+  // evaluate_into's and residuals()' working space, reused from one evaluation to the next. Not thread-safe either.
+  mutable std::vector<Eigen::Vector3d> predicted_scratch_;
+  mutable Evaluation residual_scratch_;
 };
 
 struct FitOutcome {

@@ -2,13 +2,16 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include "estimator/constants.hpp"
@@ -44,15 +47,14 @@ std::vector<Eigen::Vector3d> dead_reckoned_body_velocity(std::span<const double>
 }
 
 // The slope of a least-squares polynomial (degree <= 3) through the samples within +-half_window of each sample,
-// in the local time u = (t_j - t_k) / half_window, which keeps the normal equations well conditioned.
+// in the local time u = (t_j - t_k) / half_window, which keeps the normal equations well conditioned: of samples
+// [begin, end), into out. [first, last) is a window found for an earlier sample (or 0, 0), where the search for
+// begin's window starts.
 template <typename Value>
-std::vector<Value> cubic_slope(std::span<const double> t, std::span<const Value> x, double half_window) {
+void cubic_slope_of(std::span<const double> t, std::span<const Value> x, double half_window, std::size_t begin,
+                    std::size_t end, std::size_t& first, std::size_t& last, std::vector<Value>& out) {
   constexpr int kMaxDegree = 3;
-  if (t.size() != x.size()) throw std::invalid_argument("smoothed_derivative: t and x lengths differ");
-  if (!(half_window > 0.0)) throw std::invalid_argument("smoothed_derivative: the half window must be positive");
-  std::vector<Value> out(t.size(), Value::Zero());
-  std::size_t first = 0, last = 0;  // the window [first, last)
-  for (std::size_t k = 0; k < t.size(); ++k) {
+  for (std::size_t k = begin; k < end; ++k) {
     while (t[k] - t[first] > half_window) ++first;
     while (last < t.size() && t[last] - t[k] <= half_window) ++last;
     const int degree = std::min(kMaxDegree, static_cast<int>(last - first) - 1);
@@ -70,6 +72,29 @@ std::vector<Value> cubic_slope(std::span<const double> t, std::span<const Value>
     const Eigen::MatrixXd c = gram.topLeftCorner(n, n).ldlt().solve(moment.topRows(n));
     out[k] = c.row(1).transpose() / half_window;
   }
+}
+
+template <typename Value>
+std::vector<Value> cubic_slope(std::span<const double> t, std::span<const Value> x, double half_window) {
+  if (t.size() != x.size()) throw std::invalid_argument("smoothed_derivative: t and x lengths differ");
+  if (!(half_window > 0.0)) throw std::invalid_argument("smoothed_derivative: the half window must be positive");
+  std::vector<Value> out(t.size(), Value::Zero());
+  // Each sample's fit is its own, so a flight's are shared among the cores (a tenth of identify's time on one): the
+  // threads take runs of samples as they come free, and the numbers are the same however they were shared. A thread's
+  // runs come in time order, so its window's search goes on from its previous run's.
+  constexpr std::size_t kPerRun = 4096;
+  std::atomic<std::size_t> next{0};
+  const auto work = [&] {
+    std::size_t first = 0, last = 0;
+    for (std::size_t begin = next.fetch_add(kPerRun); begin < t.size(); begin = next.fetch_add(kPerRun))
+      cubic_slope_of(t, x, half_window, begin, std::min(begin + kPerRun, t.size()), first, last, out);
+  };
+  std::vector<std::thread> helpers;
+  const std::size_t threads =
+      std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), (t.size() + kPerRun - 1) / kPerRun);
+  for (std::size_t i = 1; i < threads; ++i) helpers.emplace_back(work);
+  work();
+  for (std::thread& helper : helpers) helper.join();
   return out;
 }
 

@@ -4,9 +4,11 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -109,6 +111,122 @@ std::vector<Box> reference_boxes(std::span<const double> t, std::span<const Vect
   return boxes;
 }
 
+// Lags a thread takes at a time. Each box is placed at all of them before the next box, its samples still in the
+// cache (an eighth less time than one lag at a time on EuRoC MH_01).
+constexpr int kLagsPerRun = 8;
+
+// One thread's working space for correlate_lags: the IMU's side of every box at each lag of a run, and where each
+// box last found itself in the IMU's samples (its start, end and middle), where the next lag's search begins.
+struct LagScratch {
+  explicit LagScratch(std::size_t boxes)
+      : y(kLagsPerRun, Eigen::VectorXd(static_cast<Eigen::Index>(2 * boxes))),
+        n(kLagsPerRun, Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(2 * boxes), 5)),
+        hints(boxes, {0, 0, 0}) {}
+  std::vector<Eigen::VectorXd> y;
+  // Nuisance columns: a constant north and east (a tilt or bias), and the lever arm's tangential acceleration
+  // R (w_dot x r) = R skew(w_dot) r, linear in the unknown lever arm r.
+  std::vector<Eigen::MatrixXd> n;
+  std::vector<std::array<std::size_t, 3>> hints;
+  bool placed = false;  // the hints hold places found at an earlier lag
+};
+
+// The partial correlation of the reference's box accelerations `x` with the IMU's at lags k * kDelayLagStep, k in
+// [first, last) (at most kLagsPerRun of them), into rho[k + half].
+void correlate_lags(const ImuSide& imu, const std::vector<Box>& boxes, const Eigen::VectorXd& x, int first, int last,
+                    int half, std::vector<double>& rho, LagScratch& scratch) {
+  for (std::size_t b = 0; b < boxes.size(); ++b) {
+    std::array<std::size_t, 3>& hint = scratch.hints[b];
+    // Unplaced, a box starts from where the box before it stands (boxes are in time order), not from the first
+    // sample: walking every box up from there was most of the estimate's time.
+    if (!scratch.placed && b > 0) hint = scratch.hints[b - 1];
+    const auto row = static_cast<Eigen::Index>(2 * b);
+    for (int k = first; k < last; ++k) {
+      Eigen::VectorXd& y = scratch.y[static_cast<std::size_t>(k - first)];
+      Eigen::MatrixXd& n = scratch.n[static_cast<std::size_t>(k - first)];
+      // The reference stamped t describes the vehicle at t - lag.
+      const double lag = k * kDelayLagStep;
+      const double t0 = boxes[b].t0 - lag, t1 = boxes[b].t1 - lag, span = t1 - t0;
+      const ImuSide::Place start = imu.locate(t0, hint[0]), end = imu.locate(t1, hint[1]);
+      y.segment<2>(row) = (imu.integral(end) - imu.integral(start)) / span;
+      const Vector3d w_dot = (imu.gyro(end) - imu.gyro(start)) / span;
+      // times r: R (w_dot x r)
+      const Eigen::Matrix3d tangential = imu.attitude(imu.locate(0.5 * (t0 + t1), hint[2])) * skew(w_dot);
+      n.block<2, 3>(row, 0) = tangential.topRows<2>();
+      n(row, 3) = 1.0;
+      n(row + 1, 4) = 1.0;
+    }
+  }
+  scratch.placed = true;
+  for (int k = first; k < last; ++k) {
+    const auto i = static_cast<std::size_t>(k - first);
+    rho[static_cast<std::size_t>(k + half)] = partial_correlation(x, scratch.y[i], scratch.n[i]);
+  }
+}
+
+// The partial correlation at every lag, -half .. half steps. The lags are independent: the threads take runs of them
+// as they come free, each with a scratch of its own, and rho is the same numbers however they were shared.
+std::vector<double> correlations(const ImuSeries& series, const std::vector<Box>& boxes, int half) {
+  const ImuSide imu(series);
+  Eigen::VectorXd x(static_cast<Eigen::Index>(2 * boxes.size()));
+  for (std::size_t b = 0; b < boxes.size(); ++b) x.segment<2>(static_cast<Eigen::Index>(2 * b)) = boxes[b].accel;
+  std::vector<double> rho(static_cast<std::size_t>(2 * half + 1));
+  std::atomic<int> next{-half};
+  const auto work = [&] {
+    LagScratch scratch(boxes.size());
+    for (int first = next.fetch_add(kLagsPerRun); first <= half; first = next.fetch_add(kLagsPerRun))
+      correlate_lags(imu, boxes, x, first, std::min(first + kLagsPerRun, half + 1), half, rho, scratch);
+  };
+  std::vector<std::thread> helpers;
+  for (unsigned i = 1; i < std::clamp(std::thread::hardware_concurrency(), 1u, 8u); ++i) helpers.emplace_back(work);
+  work();
+  for (std::thread& t : helpers) t.join();
+  return rho;
+}
+
+// The best lag and the peak's curvature, and why the lag is not to be used when it is not.
+void judge_peak(const std::vector<double>& rho, int half, ReferenceDelay& out) {
+  const std::size_t best = static_cast<std::size_t>(std::max_element(rho.begin(), rho.end()) - rho.begin());
+  const double lag_of_best = (static_cast<double>(best) - half) * kDelayLagStep;
+  out.delay_s = lag_of_best;
+  out.correlation = rho[best];
+  if (best == 0 || best + 1 == rho.size()) {
+    out.unusable = format("the best match is at the edge of the +-%.1f s searched", kMaxReferenceDelay);
+    return;
+  }
+  // The parabola through the best candidate and its neighbours: its vertex, and its curvature.
+  const double lo = rho[best - 1], mid = rho[best], hi = rho[best + 1];
+  const double second = lo - 2.0 * mid + hi;
+  if (second < 0.0) {
+    const double offset = std::clamp(0.5 * (lo - hi) / second, -0.5, 0.5);
+    out.delay_s = lag_of_best + offset * kDelayLagStep;
+    out.correlation = mid - 0.25 * (lo - hi) * offset;
+  }
+  out.curvature = -second / (kDelayLagStep * kDelayLagStep);
+  if (out.acceleration_rms < kMinDelayAcceleration) {
+    out.unusable = format("the vehicle hardly accelerates: %.3f m/s^2 RMS horizontally, %.2f needed",
+                          out.acceleration_rms, kMinDelayAcceleration);
+  } else if (out.correlation < kMinDelayCorrelation) {
+    out.unusable =
+        format("the accelerations correlate %.2f at best, %.2f needed", out.correlation, kMinDelayCorrelation);
+  } else {
+    // A second peak nearly as high, away from the first one's flanks, makes the lag ambiguous.
+    const auto away = static_cast<std::size_t>(std::lround(kDelayBoxSeconds / kDelayLagStep / 2.0));
+    for (std::size_t k = 1; k + 1 < rho.size(); ++k) {
+      const bool local_max = rho[k] >= rho[k - 1] && rho[k] >= rho[k + 1];
+      const std::size_t distance = k > best ? k - best : best - k;
+      // A peak of its own: the correlation dips between the two by more than the ambiguity (else a bump on the
+      // best peak's broad flank).
+      const double dip = *std::min_element(rho.begin() + static_cast<long>(std::min(k, best)),
+                                           rho.begin() + static_cast<long>(std::max(k, best)) + 1);
+      if (local_max && distance > away && rho[k] >= rho[best] - kDelayAmbiguity && rho[k] - dip > kDelayAmbiguity) {
+        out.unusable = format("two lags match nearly as well, %.3f and %.3f s", lag_of_best,
+                              (static_cast<double>(k) - half) * kDelayLagStep);
+        break;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 std::string describe(const ReferenceDelay& d) {
@@ -145,74 +263,8 @@ ReferenceDelay estimate_reference_delay(const ImuSeries& series, std::span<const
   for (const Box& b : boxes) ref_square += (b.accel - mean_ref).squaredNorm();
   out.acceleration_rms = std::sqrt(ref_square / static_cast<double>(boxes.size()));
 
-  const ImuSide imu(series);
   const int half = static_cast<int>(std::lround(kMaxReferenceDelay / kDelayLagStep));
-  const auto rows = static_cast<Eigen::Index>(2 * boxes.size());
-  Eigen::VectorXd x(rows), y(rows);
-  for (std::size_t b = 0; b < boxes.size(); ++b) x.segment<2>(static_cast<Eigen::Index>(2 * b)) = boxes[b].accel;
-  // Nuisance columns: a constant north and east (a tilt or bias), and the lever arm's tangential acceleration
-  // R (w_dot x r) = R skew(w_dot) r, linear in the unknown lever arm r.
-  Eigen::MatrixXd n = Eigen::MatrixXd::Zero(rows, 5);
-  std::vector<double> rho;
-  // Each box's last places in the IMU's samples (its start, end and middle), where the next lag's search begins.
-  std::vector<std::array<std::size_t, 3>> hints(boxes.size(), {0, 0, 0});
-  for (int k = -half; k <= half; ++k) {
-    const double lag = k * kDelayLagStep;
-    for (std::size_t b = 0; b < boxes.size(); ++b) {
-      // The reference stamped t describes the vehicle at t - lag.
-      const double t0 = boxes[b].t0 - lag, t1 = boxes[b].t1 - lag, span = t1 - t0;
-      const auto row = static_cast<Eigen::Index>(2 * b);
-      const ImuSide::Place start = imu.locate(t0, hints[b][0]), end = imu.locate(t1, hints[b][1]);
-      y.segment<2>(row) = (imu.integral(end) - imu.integral(start)) / span;
-      const Vector3d w_dot = (imu.gyro(end) - imu.gyro(start)) / span;
-      // times r: R (w_dot x r)
-      const Eigen::Matrix3d tangential = imu.attitude(imu.locate(0.5 * (t0 + t1), hints[b][2])) * skew(w_dot);
-      n.block<2, 3>(row, 0) = tangential.topRows<2>();
-      n(row, 3) = 1.0;
-      n(row + 1, 4) = 1.0;
-    }
-    rho.push_back(partial_correlation(x, y, n));
-  }
-  const std::size_t best = static_cast<std::size_t>(std::max_element(rho.begin(), rho.end()) - rho.begin());
-  const double lag_of_best = (static_cast<double>(best) - half) * kDelayLagStep;
-  out.delay_s = lag_of_best;
-  out.correlation = rho[best];
-  if (best == 0 || best + 1 == rho.size()) {
-    out.unusable = format("the best match is at the edge of the +-%.1f s searched", kMaxReferenceDelay);
-    return out;
-  }
-  // The parabola through the best candidate and its neighbours: its vertex, and its curvature.
-  const double lo = rho[best - 1], mid = rho[best], hi = rho[best + 1];
-  const double second = lo - 2.0 * mid + hi;
-  if (second < 0.0) {
-    const double offset = std::clamp(0.5 * (lo - hi) / second, -0.5, 0.5);
-    out.delay_s = lag_of_best + offset * kDelayLagStep;
-    out.correlation = mid - 0.25 * (lo - hi) * offset;
-  }
-  out.curvature = -second / (kDelayLagStep * kDelayLagStep);
-  if (out.acceleration_rms < kMinDelayAcceleration) {
-    out.unusable = format("the vehicle hardly accelerates: %.3f m/s^2 RMS horizontally, %.2f needed",
-                          out.acceleration_rms, kMinDelayAcceleration);
-  } else if (out.correlation < kMinDelayCorrelation) {
-    out.unusable =
-        format("the accelerations correlate %.2f at best, %.2f needed", out.correlation, kMinDelayCorrelation);
-  } else {
-    // A second peak nearly as high, away from the first one's flanks, makes the lag ambiguous.
-    const auto away = static_cast<std::size_t>(std::lround(kDelayBoxSeconds / kDelayLagStep / 2.0));
-    for (std::size_t k = 1; k + 1 < rho.size(); ++k) {
-      const bool local_max = rho[k] >= rho[k - 1] && rho[k] >= rho[k + 1];
-      const std::size_t distance = k > best ? k - best : best - k;
-      // A peak of its own: the correlation dips between the two by more than the ambiguity (else a bump on the
-      // best peak's broad flank).
-      const double dip = *std::min_element(rho.begin() + static_cast<long>(std::min(k, best)),
-                                           rho.begin() + static_cast<long>(std::max(k, best)) + 1);
-      if (local_max && distance > away && rho[k] >= rho[best] - kDelayAmbiguity && rho[k] - dip > kDelayAmbiguity) {
-        out.unusable = format("two lags match nearly as well, %.3f and %.3f s", lag_of_best,
-                              (static_cast<double>(k) - half) * kDelayLagStep);
-        break;
-      }
-    }
-  }
+  judge_peak(correlations(series, boxes, half), half, out);
   return out;
 }
 

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <future>
 #include <limits>
 #include <map>
 #include <stdexcept>
@@ -30,6 +32,12 @@ std::int64_t choose_link(const store::Store& store, std::int64_t session, const 
     if (!known) throw std::invalid_argument(session_name(session) + " has no link " + std::to_string(*link));
     return *link;
   }
+  // One link, as most recordings have: the one with the most samples if it has any, which its first sample tells
+  // without a pass over every row.
+  if (links.size() == 1) {
+    if (store.first_samples(session).empty()) throw std::invalid_argument(session_name(session) + " has no samples");
+    return links.front().id;
+  }
   std::map<std::int64_t, std::uint64_t> count;
   store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { ++count[s.link_id]; });
   if (count.empty()) throw std::invalid_argument(session_name(session) + " has no samples");
@@ -43,19 +51,20 @@ struct Reference {
   std::vector<Vector3d> position, velocity;
   std::vector<Quaterniond> attitude;
   bool has_all_velocities = true;
+  std::uint64_t rows = 0, rows_dropped = 0;  // SessionSeriesCounts' reference_rows and reference_rows_dropped
 };
 
-Reference read_reference(const store::Store& store, std::int64_t session, SessionSeriesCounts& counts) {
+Reference read_reference(const store::Store& store, std::int64_t session) {
   Reference r;
   store.for_each_reference(session, [&](const store::ReferenceRow& row) {
-    ++counts.reference_rows;
+    ++r.rows;
     const Vector3d position = vector_of(row.position);
     Quaterniond q(row.quat_wxyz[0], row.quat_wxyz[1], row.quat_wxyz[2], row.quat_wxyz[3]);
     const bool usable = position.allFinite() && q.coeffs().allFinite() && q.norm() > 0.0 &&
                         (!row.velocity || vector_of(*row.velocity).allFinite()) &&
                         (r.t_ns.empty() || row.t_ns > r.t_ns.back());
     if (!usable) {
-      ++counts.reference_rows_dropped;
+      ++r.rows_dropped;
       return;
     }
     r.t_ns.push_back(row.t_ns);
@@ -240,22 +249,23 @@ void apply_reference_delay(SessionSeries& out, const Reference& reference, const
   series.reference->velocity_ned.resize(kept);
 }
 
-}  // namespace
+// The reference read on a connection of its own while the caller reads the samples: the two reads are most of a
+// session's reading, and independent. Nothing (an invalid future) when the store has no second connection to give.
+std::future<Reference> start_reading_reference(const store::Store& store, std::int64_t session) {
+  const std::optional<std::filesystem::path> path = store.second_reader_path();
+  if (!path) return {};
+  return std::async(std::launch::async, [path = *path, session] {
+    const store::Store reader(path, {.read_only = true});
+    return read_reference(reader, session);
+  });
+}
 
-SessionSeries read_session_series(const store::Store& store, std::int64_t session,
-                                  const SessionSeriesOptions& options) {
-  const std::vector<store::Session> sessions = store.sessions();
-  if (std::none_of(sessions.begin(), sessions.end(), [&](const store::Session& s) { return s.id == session; }))
-    throw std::invalid_argument("no " + session_name(session) + " in the database");
-  SessionSeries out;
-  out.link_id = choose_link(store, session, options.link);
-
-  const std::string declared = options.imu_axes ? *options.imu_axes : declared_axes(store, session, out.link_id);
-  estimator::parse_imu_axes(declared);  // a bad spelling fails before the work
+// The link's usable samples into out.series, counted; returns each one's reception time.
+std::vector<std::int64_t> read_samples(const store::Store& store, std::int64_t session, SessionSeries& out) {
   estimator::ImuSeries& series = out.series;
   std::vector<std::int64_t> recv_mono_ns;
   std::optional<std::int64_t> first_us, last_us;
-  store.for_each_sample(session, out.link_id, [&](const protocol::Sample& s) {
+  store.for_each_motion_sample(session, out.link_id, [&](const protocol::Sample& s) {
     ++out.counts.samples;
     const Vector3d gyro = vector_of(s.gyro), accel = vector_of(s.accel);
     if (!gyro.allFinite() || !accel.allFinite()) {
@@ -274,20 +284,14 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
     recv_mono_ns.push_back(s.recv_mono_ns);
   });
   if (series.size() == 0) throw std::invalid_argument(session_name(session) + " has no usable samples");
-  out.airborne = airborne_from_events(store, session, SeriesClock(series.t, recv_mono_ns));
-  if (options.reference == ReferenceUse::none) {
-    to_body_axes(out, declared);
-    return out;
-  }
+  return recv_mono_ns;
+}
 
-  const Reference reference = read_reference(store, session, out.counts);
-  if (options.reference == ReferenceUse::when_present && out.counts.reference_rows < 2) {
-    to_body_axes(out, declared);
-    return out;
-  }
-  if (reference.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
-  if (options.reference_delay && !(std::abs(*options.reference_delay) <= kMaxDeclaredDelay))
-    throw std::invalid_argument("a reference delay must be within +-10 s (it is a receiver's latency)");
+// Keeps the samples received while the reference was recorded, each with the reference interpolated at its
+// reception time; returns their reception times.
+std::vector<std::int64_t> keep_inside_reference(SessionSeries& out, const Reference& reference,
+                                                const std::vector<std::int64_t>& recv_mono_ns, std::int64_t session) {
+  const estimator::ImuSeries& series = out.series;
   estimator::ImuSeries kept;
   kept.reference.emplace();
   std::vector<std::int64_t> kept_recv_ns;
@@ -308,7 +312,42 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   }
   if (kept.size() == 0)
     throw std::invalid_argument(session_name(session) + ": no sample was received while the reference was recorded");
-  series = std::move(kept);
+  out.series = std::move(kept);
+  return kept_recv_ns;
+}
+
+}  // namespace
+
+SessionSeries read_session_series(const store::Store& store, std::int64_t session,
+                                  const SessionSeriesOptions& options) {
+  const std::vector<store::Session> sessions = store.sessions();
+  if (std::none_of(sessions.begin(), sessions.end(), [&](const store::Session& s) { return s.id == session; }))
+    throw std::invalid_argument("no " + session_name(session) + " in the database");
+  SessionSeries out;
+  out.link_id = choose_link(store, session, options.link);
+
+  const std::string declared = options.imu_axes ? *options.imu_axes : declared_axes(store, session, out.link_id);
+  estimator::parse_imu_axes(declared);  // a bad spelling fails before the work
+  std::future<Reference> reference_read;
+  if (options.reference != ReferenceUse::none) reference_read = start_reading_reference(store, session);
+  const std::vector<std::int64_t> recv_mono_ns = read_samples(store, session, out);
+  out.airborne = airborne_from_events(store, session, SeriesClock(out.series.t, recv_mono_ns));
+  if (options.reference == ReferenceUse::none) {
+    to_body_axes(out, declared);
+    return out;
+  }
+
+  const Reference reference = reference_read.valid() ? reference_read.get() : read_reference(store, session);
+  out.counts.reference_rows = reference.rows;
+  out.counts.reference_rows_dropped = reference.rows_dropped;
+  if (options.reference == ReferenceUse::when_present && out.counts.reference_rows < 2) {
+    to_body_axes(out, declared);
+    return out;
+  }
+  if (reference.t_ns.size() < 2) throw std::invalid_argument(session_name(session) + " has no reference trajectory");
+  if (options.reference_delay && !(std::abs(*options.reference_delay) <= kMaxDeclaredDelay))
+    throw std::invalid_argument("a reference delay must be within +-10 s (it is a receiver's latency)");
+  const std::vector<std::int64_t> kept_recv_ns = keep_inside_reference(out, reference, recv_mono_ns, session);
   to_body_axes(out, declared);
   if (options.reference_delay || options.estimate_reference_delay)
     apply_reference_delay(out, reference, kept_recv_ns, options.reference_delay);

@@ -591,6 +591,38 @@ void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> li
   }
 }
 
+std::optional<std::filesystem::path> Store::second_reader_path() const {
+  if (!options_.read_only) return std::nullopt;
+  return std::filesystem::path(db_.name());
+}
+
+void Store::for_each_motion_sample(std::int64_t session, std::int64_t link,
+                                   const std::function<void(const protocol::Sample&)>& visit) const {
+  Statement query(db_,
+                  "SELECT device_time_us, recv_mono_ns, ax, ay, az, gx, gy, gz FROM samples "
+                  "WHERE session_id = ?1 AND link_id = ?2 ORDER BY id");
+  query.bind_int(1, session);
+  query.bind_int(2, link);
+  protocol::Sample sample;
+  sample.link_id = link;
+  while (query.step()) {
+    sample.device_time_us = query.column_int(0);
+    sample.recv_mono_ns = query.column_int(1);
+    sample.accel = column_reals<3>(query, 2);
+    sample.gyro = column_reals<3>(query, 5);
+    visit(sample);
+  }
+  for (const auto& w : samples_.waiting) {  // appended after every row above
+    if (w.session != session || w.sample.link_id != link) continue;
+    const protocol::Sample stored = as_stored(w.sample);
+    sample.device_time_us = stored.device_time_us;
+    sample.recv_mono_ns = stored.recv_mono_ns;
+    sample.accel = stored.accel;
+    sample.gyro = stored.gyro;
+    visit(sample);
+  }
+}
+
 std::vector<protocol::Sample> Store::first_samples(std::int64_t session) const {
   std::vector<protocol::Sample> firsts;
   for (const Link& link : links(session)) {

@@ -129,10 +129,19 @@ class Store {
                       const std::function<void(const Chunk&)>& visit) const;
   void for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
                        const std::function<void(const protocol::Sample&)>& visit) const;
+  // for_each_sample's rows of one link with only what motion estimation reads: device and reception time,
+  // accelerometer and gyro (seq, magnetometer, temperature and raw counts left at their defaults). Half the columns
+  // to fetch from each of a flight's rows (identify's read, docs/performance.md).
+  void for_each_motion_sample(std::int64_t session, std::int64_t link,
+                              const std::function<void(const protocol::Sample&)>& visit) const;
   // Each link's first sample, in link order (links without samples left out): where the session's time starts.
   std::vector<protocol::Sample> first_samples(std::int64_t session) const;
   void for_each_estimate(std::int64_t run, const std::function<void(const Estimate&)>& visit) const;
   void for_each_reference(std::int64_t session, const std::function<void(const ReferenceRow&)>& visit) const;
+  // Where another thread may open a read-only Store of its own that reads what this one reads (a Store serves one
+  // thread at a time), to read two tables at once: this one's file when it is read-only; nullopt when it is
+  // read-write, since its uncommitted rows are its own connection's.
+  std::optional<std::filesystem::path> second_reader_path() const;
 
  private:
   // One table's waiting rows and its two INSERTs (one row, kRowsPerStatement rows).
