@@ -581,8 +581,8 @@ void Store::for_each_chunk(std::int64_t session, std::optional<std::int64_t> lin
 
 void Store::for_each_sample(std::int64_t session, std::optional<std::int64_t> link,
                             const std::function<void(const protocol::Sample&)>& visit) const {
-  Statement query(db_, std::string(kSelectSample) +
-                           " WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
+  Statement query(db_,
+                  std::string(kSelectSample) + " WHERE session_id = ?1 AND (?2 IS NULL OR link_id = ?2) ORDER BY id");
   query.bind_int(1, session);
   bind_optional_int(query, 2, link);
   while (query.step()) visit(sample_from_row(query, session));
