@@ -230,6 +230,28 @@ TEST_F(IdentifyCommand, EvaluateCarriesTheLeastSquaresAnchorFromItsOwnSession) {
   }
 }
 
+// A bias no accelerometer has, with every other value plausible, is the fit trading the bias against the mounting's
+// tilt: the vehicle is fitted again with the bias held at zero and written, with a warning, not refused.
+TEST_F(IdentifyCommand, ABiasBeyondThePlausibilityTableIsHeldAtZeroAndTheCalibrationWritten) {
+  // The simulated IMU has no bias; the fitted one is small but not zero, and a table that allows 1e-6 m/s^2 makes it
+  // implausible.
+  const std::string tight = " --session 1 --model full --velocity reference --limit accel_bias=0.000001";
+  const CommandResult r = identify(tight + " --out " + out("bias-held.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("warning: the fitted accelerometer bias was implausible"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("held at zero"), std::string::npos) << r.out;
+  const json p = read_json(out("bias-held.json"));
+  EXPECT_TRUE(p.get<estimator::ModelParams>().full.accel_bias.isZero());
+  for (const auto& [key, value] : p["identification"]["std_errors"].items())
+    EXPECT_EQ(key.find("accel_bias"), std::string::npos) << key << " was fitted";
+
+  // Anything else beyond the table is still refused: only the bias is held.
+  const CommandResult lever = identify(tight + " --limit lever_arm=0.01 --out " + out("lever-refused.json"));
+  EXPECT_EQ(lever.exit_code, 1) << lever.out << lever.err;
+  EXPECT_NE(lever.out.find("refused: implausible: lever arm"), std::string::npos) << lever.out;
+  EXPECT_FALSE(fs::exists(out("lever-refused.json")));
+}
+
 TEST_F(IdentifyCommand, FitsOneCalibrationOverSeveralFlightsAndValidatesItOnOthers) {
   // The velocity defaults to the reference, which every flight of the set has.
   const CommandResult r = identify("--session 1,3 --validate-session 4 --model paper --out " + out("set.json"));

@@ -208,6 +208,41 @@ int write_or_refuse(const IdentifyCliOptions& o, const est::IdentifyResult& resu
   return 0;
 }
 
+// A fit and the plausibility limits it exceeds. When the only one is the accelerometer's bias, and the bias was fitted:
+// on a steady flight a bias and the mounting's tilt read alike (a constant force either way), and the fit can walk
+// their valley to where no accelerometer's offset is. The calibration is then fitted again with the bias held at
+// zero, the mounting carrying the flight's offset, and `bias_held` says so, instead of refusing a vehicle whose other
+// values are plausible (docs/identification.md, "Plausibility").
+struct CheckedFit {
+  est::IdentifyResult result;
+  std::vector<est::Implausibility> implausible;
+  std::optional<std::string> bias_held;
+};
+
+CheckedFit fit_checked(const est::ImuSeries& series, est::IdentifyOptions options,
+                       const est::PlausibilityLimits& limits) {
+  const auto fit = [&] {
+    return options.velocity == est::VelocitySource::filter ? diagnose::identify_by_filter_error(series, options)
+                                                           : est::identify(series, options);
+  };
+  CheckedFit out{fit(), {}, std::nullopt};
+  out.implausible = est::check_plausibility(out.result.params.full, limits);
+  const bool only_the_bias =
+      !out.implausible.empty() && std::all_of(out.implausible.begin(), out.implausible.end(),
+                                              [](const est::Implausibility& i) { return i.limit == "accel_bias"; });
+  if (options.model != est::ModelKind::full || options.hold.held(est::FullBlock::accel_bias) || !only_the_bias)
+    return out;
+  const std::string was = out.implausible.front().message;
+  options.hold.blocks[static_cast<int>(est::FullBlock::accel_bias)] = true;
+  out.result = fit();
+  out.implausible = est::check_plausibility(out.result.params.full, limits);
+  out.bias_held = "the fitted accelerometer bias was implausible (" + was +
+                  "): on a steady flight a bias reads like the mounting's tilt or a drag, so the model was fitted "
+                  "again with the bias held at zero (as --hold accel_bias), and the mounting carries the offset of "
+                  "the flights it was fitted on";
+  return out;
+}
+
 void save(const IdentifyCliOptions& o, const est::IdentifyResult& result) {
   est::save_params(o.out, result.params);
   if (!result.fits.front().convergence.empty()) {
@@ -234,11 +269,10 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
   const JoinedFlights joined = join(flights, options.velocity == est::VelocitySource::filter);
   options.train = joined.train;
   options.validate = joined.validate;
-  est::IdentifyResult result = options.velocity == est::VelocitySource::filter
-                                   ? diagnose::identify_by_filter_error(joined.set.series, options)
-                                   : est::identify(joined.set.series, options);
+  CheckedFit checked = fit_checked(joined.set.series, options, limits);
+  est::IdentifyResult& result = checked.result;
+  const std::vector<est::Implausibility>& implausible = checked.implausible;
   result.params.conditions_flight = flights.identity;
-  const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
   if (implausible.empty()) {
     measure_transfer(flights, result.params, stderr);
     save(o, result);
@@ -247,6 +281,7 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   print_summary(o, result, options.velocity, describe_sessions(flights), wall);
   print_flight_map(stderr, flights, joined);
+  if (checked.bias_held) std::printf("warning: %s\n", checked.bias_held->c_str());
   const int status = write_or_refuse(o, result, implausible);
   if (status == 0) {
     std::string listed;
@@ -273,13 +308,12 @@ int run(const IdentifyCliOptions& o) {
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   choose_velocity(o, options, session.series.reference.has_value());
   std::tie(options.train, options.validate) = o.windows.resolve(session);
-  est::IdentifyResult result = options.velocity == est::VelocitySource::filter
-                                   ? diagnose::identify_by_filter_error(session.series, options)
-                                   : est::identify(session.series, options);
+  CheckedFit checked = fit_checked(session.series, options, limits);
+  est::IdentifyResult& result = checked.result;
   result.params.identification.reference_delay = recorded_reference_delay(session);
 
   // Refused, not warned about: a model no airframe has flies worse than none (docs/identification.md, "Plausibility").
-  const std::vector<est::Implausibility> implausible = est::check_plausibility(result.params.full, limits);
+  const std::vector<est::Implausibility>& implausible = checked.implausible;
   if (implausible.empty()) save(o, result);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
@@ -300,6 +334,7 @@ int run(const IdentifyCliOptions& o) {
     std::printf("zero velocity scores train %.3f, validation %.3f m/s (horizontal)\n", zero.train.horizontal,
                 zero.validation.horizontal);
   }
+  if (checked.bias_held) std::printf("warning: %s\n", checked.bias_held->c_str());
   return write_or_refuse(o, result, implausible);
 }
 
