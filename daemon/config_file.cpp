@@ -323,7 +323,8 @@ void set_broker_address(TomlTable& t, MqttConfig& mqtt) {
   mqtt.host = host;
 }
 
-// MQTT topic levels: '/' would add a level and '+', '#' are wildcards, so stations keep to link names' characters.
+// Link names and MQTT stations: a link's name becomes a store link name and, on an XBee link, "<name>/<address>"; a
+// station is a topic level, where '/' would add a level and '+', '#' are wildcards.
 bool is_plain_name(std::string_view name) {
   return !name.empty() && std::all_of(name.begin(), name.end(), [](char c) {
     return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
@@ -553,10 +554,8 @@ void validate_links(const Config& config, std::string_view source) {
     const LinkConfig& link = config.links[i];
     const std::string which = source_prefix(source) + "link[" + std::to_string(i) + "] ('" + link.name + "')";
     // Names become store link names, and XBee radios get "<name>/<address>": keep them plain.
-    const bool plain = !link.name.empty() && std::all_of(link.name.begin(), link.name.end(), [](char c) {
-      return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
-    });
-    if (!plain) throw std::invalid_argument(which + ": 'name' must be letters, digits, '_', '-' or '.'");
+    if (!is_plain_name(link.name))
+      throw std::invalid_argument(which + ": 'name' must be letters, digits, '_', '-' or '.'");
     if (!names.insert(link.name).second) throw std::invalid_argument(which + ": the name is used twice");
     try {
       check_baud(link.baud);

@@ -16,6 +16,8 @@ struct AxisCalibration {
   std::array<std::uint8_t, 3> source_axis{0, 1, 2};
   std::array<std::int8_t, 3> sign{1, 1, 1};
 
+  bool operator==(const AxisCalibration&) const = default;
+
   // source_axis is a permutation of 0, 1, 2; every sign is +1 or -1; scales are finite and non-zero; offsets
   // finite. Whoever builds a calibration from outside input checks this: the conversions assume it.
   bool valid() const;
@@ -27,6 +29,7 @@ struct Calibration {
 
   static Calibration reference_board();  // the paper's IMU board: ADXL327 + ITG3200 + HMC5843
   bool valid() const;
+  bool operator==(const Calibration&) const = default;  // exact: a snapshot must give back the very doubles
 
   // Fills accel/gyro/mag/temperature, raw and the has_* flags; the caller fills link, sequence and times.
   Sample to_sample(const imu::ImuRaw& raw) const;

@@ -327,7 +327,7 @@ scale = [0.1, 0.2, 0.30000000000000004]
   EXPECT_EQ(copy.links[0].device.usb_pid, 0x6015);
   EXPECT_FALSE(copy.links[0].device.usb_serial.has_value());
   EXPECT_EQ(copy.links[0].feedback.rate_hz, 2.5);
-  EXPECT_EQ(copy.links[0].calibration.accel.scale, original.links[0].calibration.accel.scale) << "exact doubles";
+  EXPECT_EQ(copy.links[0].calibration, original.links[0].calibration) << "exact doubles, every field";
   EXPECT_EQ(copy.links[0].calibration.temperature_offset_c, 21.5);
   EXPECT_EQ(copy.outputs.line_streams[0].port, 9871);
 }

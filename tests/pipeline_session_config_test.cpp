@@ -18,9 +18,7 @@ TEST(SessionConfig, LinksAndCalibrationsSurviveTheSnapshot) {
   ASSERT_EQ(links.size(), 2u);
   EXPECT_EQ(links[0].name, "radio");
   EXPECT_EQ(links[0].format, protocol::WireFormat::xbee_escaped);
-  EXPECT_EQ(links[0].calibration.accel.source_axis, odd.accel.source_axis);
-  EXPECT_EQ(links[0].calibration.accel.sign, odd.accel.sign);
-  EXPECT_EQ(links[0].calibration.gyro.scale, odd.gyro.scale);  // doubles survive JSON exactly (shortest round trip)
+  EXPECT_EQ(links[0].calibration, odd);  // doubles survive JSON exactly (shortest round trip)
   EXPECT_EQ(links[0].calibration.temperature_offset_c, -3.5);
   EXPECT_EQ(links[1].format, protocol::WireFormat::mavlink);
   EXPECT_EQ(links[1].mavlink_imu, std::nullopt);  // not written, read back as every IMU
