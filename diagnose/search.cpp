@@ -315,11 +315,11 @@ double use_filter(ModelSetup& setup, const Signals& signals, const DiagnoseOptio
   return setup.lowpass_hz;
 }
 
-Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
-  DiagnoseOptions options = requested;
-  if (options.lowpass_hz != 0.0 && !(options.lowpass_hz > 0.0))
-    throw std::invalid_argument("diagnose: the low-pass cutoff must be positive");
-  const Signals signals = prepare_signals(series);
+namespace {
+
+// The model's setup from the options: the velocity source (with the filter, its band limit) and the bands the
+// residual is not fitted in. `options` becomes what the search runs with.
+ModelSetup set_up_model(const Signals& signals, DiagnoseOptions& options) {
   ModelSetup setup;
   setup.base = options.model;
   setup.velocity = options.velocity.value_or(signals.reference ? VelocitySource::reference : VelocitySource::filter);
@@ -332,8 +332,33 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   setup.signals = &signals;
   setup.ignore_bands = options.ignore_bands;
   setup.lowpass_hz = options.lowpass_hz;
-  if (options.max_steps < 0) throw std::invalid_argument("diagnose: the number of steps cannot be negative");
+  return setup;
+}
 
+// What every part of the search reads: the data, the options as the search runs them, the model's setup and the
+// windows. `setup` changes only while the base is fitted (fit_plausible_base narrows its lever-arm bound).
+struct Search {
+  const estimator::ImuSeries& series;
+  const Signals& signals;
+  const DiagnoseOptions& options;
+  const ModelSetup& setup;
+  estimator::Windows windows;
+  Range train, validation;
+  std::size_t span_lag;     // kCorrelationSpanS in samples: how far the effective sample count looks
+  bool judged_by_velocity;  // with the reference; from the IMU alone a model is judged by the filter's likelihood
+  std::chrono::steady_clock::time_point started{};
+
+  // Called from the fitting threads: options.progress must be thread-safe.
+  void report_progress(int step, std::string_view candidate, bool finished, std::size_t done, std::size_t total) const {
+    if (!options.progress) return;
+    options.progress({step, std::string(candidate), finished, done, total,
+                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()});
+  }
+};
+
+// The search over the windows asked for; throws when they hold too few samples.
+Search open_search(const estimator::ImuSeries& series, const Signals& signals, const DiagnoseOptions& options,
+                   const ModelSetup& setup) {
   const estimator::Windows windows = estimator::resolve_windows(signals.t, options.train, options.validate);
   estimator::require_trainable(windows.train);
   const Range train = range_of(signals, windows.train), validation = range_of(signals, windows.validate);
@@ -342,356 +367,480 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   if (train.count < kMinSamples || validation.count < kMinSamples)
     throw std::invalid_argument("diagnose: the training and validation windows need at least 64 samples each");
   const std::size_t span_lag = static_cast<std::size_t>(std::lround(kCorrelationSpanS * sample_rate_hz(signals.t)));
+  return Search{.series = series,
+                .signals = signals,
+                .options = options,
+                .setup = setup,
+                .windows = windows,
+                .train = train,
+                .validation = validation,
+                .span_lag = span_lag,
+                .judged_by_velocity = setup.velocity == VelocitySource::reference};
+}
 
+// What was asked: the data, the model, the windows and the rule; and a warning on eq. (12)'s drift.
+Diagnosis describe_request(const Search& search) {
+  const DiagnoseOptions& options = search.options;
   Diagnosis out;
   out.session = options.session;
   out.model = options.model == ModelKind::paper ? "paper" : "full";
-  for (int axis : setup.axes) out.axes.push_back(axis_name(axis));
-  out.velocity_source = std::string(diagnose_spelling(setup.velocity));
-  out.train_start = windows.train.start, out.train_end = windows.train.end;
-  out.validate_start = windows.validate.start, out.validate_end = windows.validate.end;
+  for (int axis : search.setup.axes) out.axes.push_back(axis_name(axis));
+  out.velocity_source = std::string(diagnose_spelling(search.setup.velocity));
+  out.train_start = search.windows.train.start, out.train_end = search.windows.train.end;
+  out.validate_start = search.windows.validate.start, out.validate_end = search.windows.validate.end;
   out.significance_rule = describe_rule(options);
-  if (setup.velocity == VelocitySource::eq12) {
-    if (auto drift = estimator::eq12_drift_warning(series, signals.level_mounting, windows.train))
+  if (search.setup.velocity == VelocitySource::eq12) {
+    if (auto drift = estimator::eq12_drift_warning(search.series, search.signals.level_mounting, search.windows.train))
       out.warnings.push_back(std::move(*drift));
   }
+  return out;
+}
 
-  const auto started = std::chrono::steady_clock::now();
-  const auto report_progress = [&](int step, std::string_view candidate, bool finished, std::size_t done,
-                                   std::size_t total) {
-    if (!options.progress) return;
-    options.progress({step, std::string(candidate), finished, done, total,
-                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()});
-  };
-  report_progress(0, "base", false, 0, 1);
-  // The model as the live estimator will run it, what it does for the velocity (with a reference) or how likely the
-  // filter finds the accelerometer with it (from the IMU alone), and whether it is plausible.
-  const bool judged_by_velocity = setup.velocity == VelocitySource::reference;
-  // `flown_as`: the model users would fly instead, for a model whose last effect the live estimator does not run (a
-  // vibration line is noise to it): its velocity and likelihood are that model's, not those of a filter told the
-  // residual it leaves is smaller than what it will be given.
-  const auto judge = [&](const Model& model, State& state, const State* flown_as = nullptr) {
-    state.params = live_params(model, state.fit.values, state.fit.std_errors);
-    record_fit(state.params, model, state.fit.values, train, validation);
-    if (flown_as != nullptr) {
-      state.summary.velocity = flown_as->summary.velocity;
-      state.summary.likelihood = flown_as->summary.likelihood;
-    } else {
-      state.summary.velocity = estimator::score_velocity(series, state.params, windows);
-      if (!judged_by_velocity)
-        state.summary.likelihood = estimator::filter_log_likelihood(series, state.params, windows);
-    }
-    state.summary.implausible.clear();
-    state.implausible_limits.clear();
-    for (const estimator::Implausibility& i : estimator::check_plausibility(state.params.full, options.limits)) {
-      state.summary.implausible.push_back(i.message);
-      state.implausible_limits.push_back(i.limit);
-    }
-  };
-  const auto fit_base = [&] {
-    const Model base(signals, setup);
-    State state = settle(base, fit(base, base.base_start(train), train, 50, FitStop::cost, cores()), train, validation);
-    judge(base, state);
-    return state;
-  };
-  State current = fit_base();
+// The model as the live estimator will run it, what it does for the velocity (with a reference) or how likely the
+// filter finds the accelerometer with it (from the IMU alone), and whether it is plausible.
+// `flown_as`: the model users would fly instead, for a model whose last effect the live estimator does not run (a
+// vibration line is noise to it): its velocity and likelihood are that model's, not those of a filter told the
+// residual it leaves is smaller than what it will be given.
+void judge(const Search& search, const Model& model, State& state, const State* flown_as = nullptr) {
+  state.params = live_params(model, state.fit.values, state.fit.std_errors);
+  record_fit(state.params, model, state.fit.values, search.train, search.validation);
+  if (flown_as != nullptr) {
+    state.summary.velocity = flown_as->summary.velocity;
+    state.summary.likelihood = flown_as->summary.likelihood;
+  } else {
+    state.summary.velocity = estimator::score_velocity(search.series, state.params, search.windows);
+    if (!search.judged_by_velocity)
+      state.summary.likelihood = estimator::filter_log_likelihood(search.series, state.params, search.windows);
+  }
+  state.summary.implausible.clear();
+  state.implausible_limits.clear();
+  for (const estimator::Implausibility& i : estimator::check_plausibility(state.params.full, search.options.limits)) {
+    state.summary.implausible.push_back(i.message);
+    state.implausible_limits.push_back(i.limit);
+  }
+}
+
+// The base model alone within the setup's lever-arm bound, fitted on the training window and judged.
+State fit_base(const Search& search) {
+  const Model base(search.signals, search.setup);
+  State state = settle(base, fit(base, base.base_start(search.train), search.train, 50, FitStop::cost, cores()),
+                       search.train, search.validation);
+  judge(search, base, state);
+  return state;
+}
+
+// Whether a component of the base's lever arm sits on the setup's bound.
+bool lever_arm_at_bound(const Search& search, const State& current) {
+  const double bound = search.setup.lever_arm_bound;
+  const std::vector<Parameter> base = Model(search.signals, search.setup).parameters();
+  for (std::size_t i = 0; i < base.size() && i < current.fit.values.size(); ++i) {
+    if (base[i].unit == "m" && std::abs(std::abs(current.fit.values[i]) - bound) <= kAtBoundFraction * bound)
+      return true;
+  }
+  return false;
+}
+
+// A base no airframe has is not carried on: it is fitted again with its lever arm inside the table (a box
+// inscribed in the table's sphere for the 3-D model), from the same start. `setup` is the one `search` reads.
+void refit_base_inside_table(const Search& search, ModelSetup& setup, State& current,
+                             std::vector<std::string>& warnings) {
+  const DiagnoseOptions& options = search.options;
+  std::string was = current.summary.implausible.front();
+  setup.lever_arm_bound =
+      options.model == ModelKind::full ? options.limits.lever_arm / std::sqrt(3.0) : options.limits.lever_arm;
+  current = fit_base(search);
+  char text[480];
+  std::snprintf(text, sizeof text,
+                "the base model's first fit was implausible (%s); it was fitted again with each lever-arm component "
+                "within +-%.3g m",
+                was.c_str(), setup.lever_arm_bound);
+  warnings.emplace_back(text);
+  if (lever_arm_at_bound(search, current)) {
+    // Pushed to the edge of the box, the lever arm is not placed by these data either: the IMU is taken at the
+    // mass centre, the assumption that claims least.
+    setup.lever_arm_bound = 0.0;
+    current = fit_base(search);
+    warnings.emplace_back(
+        "inside the table the lever arm went to the edge of its range: the data do not place it, and it is held at "
+        "the mass centre (0, 0, 0)");
+  }
+}
+
+// The base model the search starts from: fitted, and fitted again inside the plausibility table when its lever arm
+// is beyond it (saying so in `warnings`).
+State fit_plausible_base(const Search& search, ModelSetup& setup, std::vector<std::string>& warnings) {
+  State current = fit_base(search);
   const bool lever_arm_implausible = std::find(current.implausible_limits.begin(), current.implausible_limits.end(),
                                                "lever_arm") != current.implausible_limits.end();
-  if (lever_arm_implausible) {
-    // A base no airframe has is not carried on: it is fitted again with its lever arm inside the table (a box
-    // inscribed in the table's sphere for the 3-D model), from the same start.
-    std::string was = current.summary.implausible.front();
-    setup.lever_arm_bound =
-        options.model == ModelKind::full ? options.limits.lever_arm / std::sqrt(3.0) : options.limits.lever_arm;
-    current = fit_base();
-    char text[480];
-    std::snprintf(text, sizeof text,
-                  "the base model's first fit was implausible (%s); it was fitted again with each lever-arm component "
-                  "within +-%.3g m",
-                  was.c_str(), setup.lever_arm_bound);
-    out.warnings.emplace_back(text);
-    const auto lever_arm_at_bound = [&] {
-      const std::vector<Parameter> base = Model(signals, setup).parameters();
-      for (std::size_t i = 0; i < base.size() && i < current.fit.values.size(); ++i) {
-        if (base[i].unit == "m" && std::abs(std::abs(current.fit.values[i]) - setup.lever_arm_bound) <=
-                                       kAtBoundFraction * setup.lever_arm_bound)
-          return true;
-      }
-      return false;
-    };
-    if (lever_arm_at_bound()) {
-      // Pushed to the edge of the box, the lever arm is not placed by these data either: the IMU is taken at the
-      // mass centre, the assumption that claims least.
-      setup.lever_arm_bound = 0.0;
-      current = fit_base();
-      out.warnings.emplace_back(
-          "inside the table the lever arm went to the edge of its range: the data do not place it, and it is held at "
-          "the mass centre (0, 0, 0)");
-    }
-  }
-  const Model base_model(signals, setup);
+  if (lever_arm_implausible) refit_base_inside_table(search, setup, current, warnings);
+  return current;
+}
+
+// The base model in the report: its fit, zero velocity's error beside it (with a reference), its residual.
+void describe_base(const Search& search, const State& current, Diagnosis& out) {
+  const Model base_model(search.signals, search.setup);
   out.base = current.summary;
-  if (series.reference)
-    out.zero_velocity = estimator::zero_velocity_scores(series, current.params.full.mounting, windows);
-  out.base_residual = analyse(base_model, current, validation, options);
-  const AxisValues base_validation_residual = current.validation_residual;
+  if (search.series.reference)
+    out.zero_velocity = estimator::zero_velocity_scores(search.series, current.params.full.mounting, search.windows);
+  out.base_residual = analyse(base_model, current, search.validation, search.options);
+}
 
-  for (int step = 0; step < options.max_steps; ++step) {
-    const std::vector<std::string> in_model = names_of(current.effects);
-    // Only judged when the attitude comes from the gyro, and only if the current model's attitude is a flight's.
-    const bool judge_tilt = setup.velocity == VelocitySource::eq12 &&
-                            largest_tilt(Model(signals, setup, current.effects), current.fit.values, train,
-                                         validation) <= kMaxFlightTiltRad;
-    // One candidate: the current model plus `effect`, fitted on the training window and tested on the validation
-    // window; or the reason it was not tried.
-    unsigned jacobian_threads = 1;  // set for each round of candidates
-    const auto try_effect = [&](const Effect& effect) -> std::pair<CandidateTrial, std::optional<State>> {
-      CandidateTrial trial;
-      trial.effect = std::string(effect.name());
-      if (auto why = effect.why_not(setup, in_model)) {
-        trial.skipped = *why;
-        return {trial, std::nullopt};
-      }
-      try {
-        // The effects it needs first (a compound candidate), then the effect itself.
-        std::vector<const Effect*> effects = current.effects;
-        for (const std::string& needed : effect.needs(setup, in_model)) {
-          effects.push_back(find_effect(needed));
-          trial.with.push_back(needed);
-        }
-        effects.push_back(&effect);
-        const Model model(signals, setup, effects);
-        // Warm start: the current values, then each new effect's own start.
-        std::vector<double> start = current.fit.values;
-        const std::size_t offset = start.size();
-        for (std::size_t i = offset; i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
-        const std::span<const double> train_t(signals.t.data() + train.first, train.count);
-        const StartContext context{setup, train_t, current.train_residual};
-        std::vector<std::size_t> drag;
-        for (std::size_t e = current.effects.size(); e < effects.size(); ++e) {
-          const auto own = std::span<double>(start).subspan(model.effect_offset(e), model.effect_size(e));
-          if (auto why = effects[e]->start(context, own)) {
-            trial.skipped = *why;
-            return {trial, std::nullopt};
-          }
-          if (setup.velocity == VelocitySource::filter && effects[e]->adds_drag()) {
-            for (std::size_t i = 0; i < model.effect_size(e); ++i) drag.push_back(model.effect_offset(e) + i);
-          }
-        }
-        if (!drag.empty()) model.scan_drag_start(start, drag, train);
-        const std::size_t own_offset = model.effect_offset(effects.size() - 1);
-        // Several starting points: each is screened by a few iterations, at once, on a model of its own (a model's
-        // caches are not shared between threads); the one with the lowest training cost then (the earlier on a tie)
-        // is fitted to convergence. The basins the starts are for differ from the first iterations on.
-        std::vector<std::vector<double>> starts{start};
-        for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
-          starts.push_back(start);
-          std::copy(more.begin(), more.end(), starts.back().begin() + static_cast<std::ptrdiff_t>(own_offset));
-        }
-        std::vector<double> chosen_start = starts.front();
-        if (starts.size() > 1) {
-          constexpr int kScreenIterations = 8;
-          std::vector<std::future<FitOutcome>> screened;
-          for (std::size_t i = 0; i < starts.size(); ++i) {
-            screened.push_back(std::async(std::launch::async, [&, i] {
-              const Model own(signals, setup, effects);
-              return fit(own, starts[i], train, kScreenIterations);
-            }));
-          }
-          double lowest = std::numeric_limits<double>::infinity();
-          for (std::future<FitOutcome>& s : screened) {
-            FitOutcome o = s.get();
-            if (o.convergence.back() < lowest) lowest = o.convergence.back(), chosen_start = std::move(o.values);
-          }
-        }
-        FitOutcome best = fit(model, chosen_start, train, 50, FitStop::cost, jacobian_threads);
-        if (auto why = judge_tilt ? unflyable(model, best.values, train, validation) : std::nullopt) {
-          trial.skipped = *why;
-          return {trial, std::nullopt};
-        }
-        // Refused for what it makes implausible; a limit the current model already exceeds (its base, say) is
-        // flagged there and would otherwise block every step.
-        std::vector<estimator::Implausibility> implausible;
-        for (estimator::Implausibility& i :
-             estimator::check_plausibility(live_params(model, best.values).full, options.limits)) {
-          if (std::find(current.implausible_limits.begin(), current.implausible_limits.end(), i.limit) ==
-              current.implausible_limits.end())
-            implausible.push_back(std::move(i));
-        }
-        if (!implausible.empty()) {
-          trial.skipped = "implausible: " + implausible.front().message;
-          for (std::size_t i = 1; i < implausible.size(); ++i) trial.skipped += "; " + implausible[i].message;
-          return {trial, std::nullopt};
-        }
-        if (auto why = options.judge_by_flight ? undetermined(model, best, offset) : std::nullopt) {
-          trial.skipped = *why;
-          return {trial, std::nullopt};
-        }
-        State candidate = settle(model, std::move(best), train, validation);
-        judge(model, candidate, estimator::live_effect_refusal(effect.name()) ? &current : nullptr);
-        trial.rmse_train = candidate.summary.rmse_train;
-        trial.rmse_validation = candidate.summary.rmse_validation;
-        if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;
-        if (candidate.summary.likelihood) trial.likelihood_validation = candidate.summary.likelihood->validation;
-        double n_eff = 0.0;
-        for (const std::vector<double>& r : candidate.validation_residual) n_eff += effective_samples(r, span_lag);
-        const FTest test = validation_f_test(sum_of_squares(current.validation_residual),
-                                             sum_of_squares(candidate.validation_residual),
-                                             model.parameters().size() - offset, model.parameters().size(), n_eff);
-        trial.statistic = test.statistic;
-        trial.p_value = test.p_value;
-        return {trial, std::move(candidate)};
-      } catch (const std::exception& e) {
-        trial.skipped = std::string("failed to fit: ") + e.what();
-        return {trial, std::nullopt};
-      }
-    };
-    // Single candidates first. A compound one (an effect with what it needs, Effect::needs) only when no single
-    // candidate passes the rules: the effects it brings along are candidates of their own, and one of them that
-    // passes alone is the simpler explanation.
-    std::vector<const Effect*> singles, compounds;
-    for (const auto& effect : effect_library()) {
-      if (std::find(current.effects.begin(), current.effects.end(), effect.get()) != current.effects.end()) continue;
-      (effect->needs(setup, in_model).empty() ? singles : compounds).push_back(effect.get());
-    }
-    std::vector<CandidateTrial> trials;
-    std::vector<std::optional<State>> fitted;
-    const double rmse_before = current.summary.rmse_validation;
-    // What users fly with, before this step: the velocity a step must lower, or the likelihood it must raise.
-    const std::optional<double> velocity_before =
-        current.summary.velocity ? std::optional(current.summary.velocity->validation.horizontal) : std::nullopt;
-    const std::optional<double> likelihood_before =
-        current.summary.likelihood ? std::optional(current.summary.likelihood->validation) : std::nullopt;
-    const std::optional<double> flight_before = flight_score(velocity_before, likelihood_before, judged_by_velocity);
-    std::size_t tried = 0;
-    double level = options.significance;
-    // Fits `untried` on every core at once, kept in library order so that the outcome does not depend on which
-    // finishes first, and judges every candidate so far by the significance rule.
-    const auto fit_and_judge = [&](const std::vector<const Effect*>& untried) {
-      const std::size_t first = trials.size();
-      trials.resize(first + untried.size());
-      fitted.resize(first + untried.size());
-      std::atomic<std::size_t> next{0}, done{0};
-      const auto work = [&] {
-        for (std::size_t i = next++; i < untried.size(); i = next++) {
-          report_progress(step + 1, untried[i]->name(), false, done.load(), untried.size());
-          std::tie(trials[first + i], fitted[first + i]) = try_effect(*untried[i]);
-          report_progress(step + 1, untried[i]->name(), true, ++done, untried.size());
-        }
-      };
-      const std::size_t threads = std::min<std::size_t>(cores(), untried.size());
-      // The cores the candidates leave idle (a step with fewer candidates than cores) share each fit's Jacobian.
-      jacobian_threads = static_cast<unsigned>(cores() / std::max<std::size_t>(threads, 1));
-      std::vector<std::thread> pool;
-      for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
-      work();
-      for (std::thread& t : pool) t.join();
+// One step of the search: the model it starts from, and what each of its candidates is tried with.
+struct StepContext {
+  const Search& search;
+  int step;  // from 0
+  const State& current;
+  std::vector<std::string> in_model;  // the current model's effects, by name
+  bool judge_tilt;                    // whether a candidate is refused for tilting past 90 deg
+};
 
-      tried = static_cast<std::size_t>(
-          std::count_if(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
-      level = options.significance / static_cast<double>(std::max<std::size_t>(tried, 1));
-      for (CandidateTrial& t : trials) {
-        if (!t.skipped.empty()) continue;
-        const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * rmse_before;
-        const bool passes_f_test = t.p_value < level;
-        // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
-        const std::optional<double> score =
-            flight_score(t.velocity_validation, t.likelihood_validation, judged_by_velocity);
-        const bool no_worse_flown =
-            !options.judge_by_flight || !(flight_before && score) || flies_no_worse(*score, *flight_before, options);
-        t.significant = improves && passes_f_test && no_worse_flown;
-        char why[260];
-        t.rejected_by.clear();
-        if (improves && passes_f_test && !no_worse_flown && judged_by_velocity) {
-          std::snprintf(why, sizeof why,
-                        "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
-                        *velocity_before, *t.velocity_validation);
-          t.rejected_by = why;
-        } else if (improves && passes_f_test && !no_worse_flown) {
-          std::snprintf(why, sizeof why,
-                        "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
-                        "must not lower it)",
-                        *likelihood_before, *t.likelihood_validation);
-          t.rejected_by = why;
-        } else if (!improves) {
-          std::snprintf(why, sizeof why, "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
-                        100.0 * (t.rmse_validation / rmse_before - 1.0), 100.0 * options.min_improvement);
-          t.rejected_by = why;
-        } else if (!passes_f_test) {
-          std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
-                        options.significance, tried);
-          t.rejected_by = why;
-        }
-      }
-    };
-    fit_and_judge(singles);
-    const bool single_passes =
-        std::any_of(trials.begin(), trials.end(), [](const CandidateTrial& t) { return t.significant; });
-    if (!single_passes) {
-      fit_and_judge(compounds);
-    } else {
-      for (const Effect* e : compounds) {
-        CandidateTrial trial;
-        trial.effect = std::string(e->name());
-        trial.with = e->needs(setup, in_model);
-        trial.skipped = "a compound candidate, tried only when no single candidate passes the rules";
-        trials.push_back(std::move(trial));
-        fitted.emplace_back();
-      }
-    }
-    // Best first, the skipped after, in library order. Judged by the flight, the step taken is among the candidates
-    // that pass every rule and fly best (within flight_tolerance of the best validation velocity or likelihood): the
-    // lowest specific-force residual is no reason to fly a worse velocity, nor to stop when that candidate fails the
-    // flight's rule while another passes. Among those, and otherwise, the lowest validation residual.
-    const std::vector<bool> flies_best = flying_best(trials, judged_by_velocity, options);
-    std::vector<std::size_t> order(trials.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-      const bool a_tried = trials[a].skipped.empty(), b_tried = trials[b].skipped.empty();
-      if (a_tried != b_tried) return a_tried;
-      if (!a_tried) return false;
-      if (flies_best[a] != flies_best[b]) return static_cast<bool>(flies_best[a]);
-      return trials[a].rmse_validation < trials[b].rmse_validation;
-    });
-    std::vector<CandidateTrial> sorted;
-    for (std::size_t i : order) sorted.push_back(trials[i]);
+StepContext open_step(const Search& search, int step, const State& current) {
+  std::vector<std::string> in_model = names_of(current.effects);
+  // Only judged when the attitude comes from the gyro, and only if the current model's attitude is a flight's.
+  const bool judge_tilt = search.setup.velocity == VelocitySource::eq12 &&
+                          largest_tilt(Model(search.signals, search.setup, current.effects), current.fit.values,
+                                       search.train, search.validation) <= kMaxFlightTiltRad;
+  return {search, step, current, std::move(in_model), judge_tilt};
+}
 
-    if (tried == 0 || !trials[order.front()].significant) {
-      out.last_candidates = std::move(sorted);
-      break;
-    }
-    Step s;
-    s.effect = trials[order.front()].effect;
-    s.with = trials[order.front()].with;
-    s.rmse_train_before = current.summary.rmse_train;
-    s.rmse_validation_before = rmse_before;
-    current = std::move(*fitted[order.front()]);  // judged when it was tried
-    s.fit = current.summary;
-    s.params = current.summary.effect_params.back();
-    s.candidates = std::move(sorted);
-    const Model model(signals, setup, current.effects);
-    s.residual = analyse(model, current, validation, options);
-    out.steps.push_back(std::move(s));
+// The effects of a candidate model: the current model's, the effects `effect` needs (a compound candidate; named in
+// trial.with), then the effect itself.
+std::vector<const Effect*> candidate_effects(const StepContext& step, const Effect& effect, CandidateTrial& trial) {
+  std::vector<const Effect*> effects = step.current.effects;
+  for (const std::string& needed : effect.needs(step.search.setup, step.in_model)) {
+    effects.push_back(find_effect(needed));
+    trial.with.push_back(needed);
   }
+  effects.push_back(&effect);
+  return effects;
+}
 
+// Appends each new effect's own start to `start` (the current values), and scans the drag the new effects add when
+// the velocity comes from the filter. Why an effect cannot start on these data, or nullopt.
+std::optional<std::string> add_effect_starts(const StepContext& step, const Model& model,
+                                             const std::vector<const Effect*>& effects, std::vector<double>& start) {
+  const Search& search = step.search;
+  for (std::size_t i = start.size(); i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+  const std::span<const double> train_t(search.signals.t.data() + search.train.first, search.train.count);
+  const StartContext context{search.setup, train_t, step.current.train_residual};
+  std::vector<std::size_t> drag;
+  for (std::size_t e = step.current.effects.size(); e < effects.size(); ++e) {
+    const auto own = std::span<double>(start).subspan(model.effect_offset(e), model.effect_size(e));
+    if (auto why = effects[e]->start(context, own)) return why;
+    if (search.setup.velocity == VelocitySource::filter && effects[e]->adds_drag()) {
+      for (std::size_t i = 0; i < model.effect_size(e); ++i) drag.push_back(model.effect_offset(e) + i);
+    }
+  }
+  if (!drag.empty()) model.scan_drag_start(start, drag, search.train);
+  return std::nullopt;
+}
+
+// Where the candidate's fit starts: `start`, or one of the effect's other starts (Effect::more_starts).
+std::vector<double> screened_start(const Search& search, const Effect& effect,
+                                   const std::vector<const Effect*>& effects, const Model& model,
+                                   const std::vector<double>& start) {
+  const std::size_t own_offset = model.effect_offset(effects.size() - 1);
+  // Several starting points: each is screened by a few iterations, at once, on a model of its own (a model's
+  // caches are not shared between threads); the one with the lowest training cost then (the earlier on a tie)
+  // is fitted to convergence. The basins the starts are for differ from the first iterations on.
+  std::vector<std::vector<double>> starts{start};
+  for (const std::vector<double>& more : effect.more_starts(std::span<const double>(start).subspan(own_offset))) {
+    starts.push_back(start);
+    std::copy(more.begin(), more.end(), starts.back().begin() + static_cast<std::ptrdiff_t>(own_offset));
+  }
+  std::vector<double> chosen_start = starts.front();
+  if (starts.size() > 1) {
+    constexpr int kScreenIterations = 8;
+    std::vector<std::future<FitOutcome>> screened;
+    for (std::size_t i = 0; i < starts.size(); ++i) {
+      screened.push_back(std::async(std::launch::async, [&, i] {
+        const Model own(search.signals, search.setup, effects);
+        return fit(own, starts[i], search.train, kScreenIterations);
+      }));
+    }
+    double lowest = std::numeric_limits<double>::infinity();
+    for (std::future<FitOutcome>& s : screened) {
+      FitOutcome o = s.get();
+      if (o.convergence.back() < lowest) lowest = o.convergence.back(), chosen_start = std::move(o.values);
+    }
+  }
+  return chosen_start;
+}
+
+// Why a fitted candidate is refused whatever its gain (it tilts past a flight's attitude, it is implausible, or,
+// judged by the flight, the data do not determine the parameters from `offset` on), or nullopt.
+std::optional<std::string> refused_fit(const StepContext& step, const Model& model, const FitOutcome& best,
+                                       std::size_t offset) {
+  const Search& search = step.search;
+  if (auto why = step.judge_tilt ? unflyable(model, best.values, search.train, search.validation) : std::nullopt)
+    return why;
+  // Refused for what it makes implausible; a limit the current model already exceeds (its base, say) is
+  // flagged there and would otherwise block every step.
+  const std::vector<std::string>& already = step.current.implausible_limits;
+  std::vector<estimator::Implausibility> implausible;
+  for (estimator::Implausibility& i :
+       estimator::check_plausibility(live_params(model, best.values).full, search.options.limits)) {
+    if (std::find(already.begin(), already.end(), i.limit) == already.end()) implausible.push_back(std::move(i));
+  }
+  if (!implausible.empty()) {
+    std::string why = "implausible: " + implausible.front().message;
+    for (std::size_t i = 1; i < implausible.size(); ++i) why += "; " + implausible[i].message;
+    return why;
+  }
+  return search.options.judge_by_flight ? undetermined(model, best, offset) : std::nullopt;
+}
+
+// The fitted candidate as a model: judged (flown as the current model when the live estimator does not run its
+// effect), with its errors and the significance rule's F-test against the current model written into `trial`.
+State measure_candidate(const StepContext& step, const Effect& effect, const Model& model, FitOutcome best,
+                        std::size_t offset, CandidateTrial& trial) {
+  const Search& search = step.search;
+  const State& current = step.current;
+  State candidate = settle(model, std::move(best), search.train, search.validation);
+  judge(search, model, candidate, estimator::live_effect_refusal(effect.name()) ? &current : nullptr);
+  trial.rmse_train = candidate.summary.rmse_train;
+  trial.rmse_validation = candidate.summary.rmse_validation;
+  if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;
+  if (candidate.summary.likelihood) trial.likelihood_validation = candidate.summary.likelihood->validation;
+  double n_eff = 0.0;
+  for (const std::vector<double>& r : candidate.validation_residual) n_eff += effective_samples(r, search.span_lag);
+  const FTest test =
+      validation_f_test(sum_of_squares(current.validation_residual), sum_of_squares(candidate.validation_residual),
+                        model.parameters().size() - offset, model.parameters().size(), n_eff);
+  trial.statistic = test.statistic;
+  trial.p_value = test.p_value;
+  return candidate;
+}
+
+// One candidate: the current model plus `effect`, fitted on the training window and tested on the validation
+// window; or the reason it was not tried.
+std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext& step, const Effect& effect,
+                                                              unsigned jacobian_threads) {
+  const Search& search = step.search;
+  CandidateTrial trial;
+  trial.effect = std::string(effect.name());
+  if (auto why = effect.why_not(search.setup, step.in_model)) {
+    trial.skipped = *why;
+    return {trial, std::nullopt};
+  }
+  try {
+    // The effects it needs first (a compound candidate), then the effect itself.
+    const std::vector<const Effect*> effects = candidate_effects(step, effect, trial);
+    const Model model(search.signals, search.setup, effects);
+    // Warm start: the current values, then each new effect's own start.
+    std::vector<double> start = step.current.fit.values;
+    const std::size_t offset = start.size();
+    if (auto why = add_effect_starts(step, model, effects, start)) {
+      trial.skipped = *why;
+      return {trial, std::nullopt};
+    }
+    FitOutcome best = fit(model, screened_start(search, effect, effects, model, start), search.train, 50, FitStop::cost,
+                          jacobian_threads);
+    if (auto why = refused_fit(step, model, best, offset)) {
+      trial.skipped = *why;
+      return {trial, std::nullopt};
+    }
+    // Two statements: `trial` is copied into the pair only once measure_candidate has filled it.
+    State candidate = measure_candidate(step, effect, model, std::move(best), offset, trial);
+    return {trial, std::move(candidate)};
+  } catch (const std::exception& e) {
+    trial.skipped = std::string("failed to fit: ") + e.what();
+    return {trial, std::nullopt};
+  }
+}
+
+// The candidates of a step so far, in library order: what each gave, and each tried one's fitted model.
+struct Trials {
+  std::vector<CandidateTrial> trials;
+  std::vector<std::optional<State>> fitted;
+  std::size_t tried = 0;  // not skipped; the significance level is shared among them (set by apply_rules)
+};
+
+// Fits `untried` on every core at once, kept in library order so that the outcome does not depend on which
+// finishes first.
+void fit_candidates_in_parallel(const StepContext& step, const std::vector<const Effect*>& untried, Trials& out) {
+  const std::size_t first = out.trials.size();
+  out.trials.resize(first + untried.size());
+  out.fitted.resize(first + untried.size());
+  std::atomic<std::size_t> next{0}, done{0};
+  const std::size_t threads = std::min<std::size_t>(cores(), untried.size());
+  // The cores the candidates leave idle (a step with fewer candidates than cores) share each fit's Jacobian.
+  const auto jacobian_threads = static_cast<unsigned>(cores() / std::max<std::size_t>(threads, 1));
+  const auto work = [&] {
+    for (std::size_t i = next++; i < untried.size(); i = next++) {
+      step.search.report_progress(step.step + 1, untried[i]->name(), false, done.load(), untried.size());
+      std::tie(out.trials[first + i], out.fitted[first + i]) = try_candidate(step, *untried[i], jacobian_threads);
+      step.search.report_progress(step.step + 1, untried[i]->name(), true, ++done, untried.size());
+    }
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+}
+
+// What a step must beat: the current model's validation RMSE and what users fly with, before this step: the
+// velocity a step must lower, or the likelihood it must raise.
+struct BeforeStep {
+  double rmse_validation = 0.0;
+  std::optional<double> velocity, likelihood, flight;
+};
+
+BeforeStep before_step(const State& current, bool judged_by_velocity) {
+  BeforeStep before;
+  before.rmse_validation = current.summary.rmse_validation;
+  before.velocity =
+      current.summary.velocity ? std::optional(current.summary.velocity->validation.horizontal) : std::nullopt;
+  before.likelihood = current.summary.likelihood ? std::optional(current.summary.likelihood->validation) : std::nullopt;
+  before.flight = flight_score(before.velocity, before.likelihood, judged_by_velocity);
+  return before;
+}
+
+// Judges every candidate so far by the significance rule, at the level shared among all those tried, and names the
+// rule that rejects each one that fails.
+void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
+  const DiagnoseOptions& options = search.options;
+  out.tried = static_cast<std::size_t>(
+      std::count_if(out.trials.begin(), out.trials.end(), [](const CandidateTrial& t) { return t.skipped.empty(); }));
+  const double level = options.significance / static_cast<double>(std::max<std::size_t>(out.tried, 1));
+  for (CandidateTrial& t : out.trials) {
+    if (!t.skipped.empty()) continue;
+    const bool improves = t.rmse_validation <= (1.0 - options.min_improvement) * before.rmse_validation;
+    const bool passes_f_test = t.p_value < level;
+    // The velocity or likelihood rule: a lower specific-force residual is not worth a worse velocity.
+    const std::optional<double> score =
+        flight_score(t.velocity_validation, t.likelihood_validation, search.judged_by_velocity);
+    const bool no_worse_flown =
+        !options.judge_by_flight || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
+    t.significant = improves && passes_f_test && no_worse_flown;
+    char why[260];
+    t.rejected_by.clear();
+    if (improves && passes_f_test && !no_worse_flown && search.judged_by_velocity) {
+      std::snprintf(why, sizeof why,
+                    "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
+                    *before.velocity, *t.velocity_validation);
+      t.rejected_by = why;
+    } else if (improves && passes_f_test && !no_worse_flown) {
+      std::snprintf(why, sizeof why,
+                    "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
+                    "must not lower it)",
+                    *before.likelihood, *t.likelihood_validation);
+      t.rejected_by = why;
+    } else if (!improves) {
+      std::snprintf(why, sizeof why, "minimum-gain rule: validation RMSE %+.2f %% (needs at least -%g %%)",
+                    100.0 * (t.rmse_validation / before.rmse_validation - 1.0), 100.0 * options.min_improvement);
+      t.rejected_by = why;
+    } else if (!passes_f_test) {
+      std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
+                    options.significance, out.tried);
+      t.rejected_by = why;
+    }
+  }
+}
+
+// Fits and judges every candidate of a step. Single candidates first. A compound one (an effect with what it needs,
+// Effect::needs) only when no single candidate passes the rules: the effects it brings along are candidates of
+// their own, and one of them that passes alone is the simpler explanation.
+Trials fit_and_judge_candidates(const StepContext& step) {
+  const Search& search = step.search;
+  std::vector<const Effect*> singles, compounds;
+  for (const auto& effect : effect_library()) {
+    if (std::find(step.current.effects.begin(), step.current.effects.end(), effect.get()) != step.current.effects.end())
+      continue;
+    (effect->needs(search.setup, step.in_model).empty() ? singles : compounds).push_back(effect.get());
+  }
+  Trials out;
+  const BeforeStep before = before_step(step.current, search.judged_by_velocity);
+  fit_candidates_in_parallel(step, singles, out);
+  apply_rules(search, before, out);
+  const bool single_passes =
+      std::any_of(out.trials.begin(), out.trials.end(), [](const CandidateTrial& t) { return t.significant; });
+  if (!single_passes) {
+    fit_candidates_in_parallel(step, compounds, out);
+    apply_rules(search, before, out);
+  } else {
+    for (const Effect* e : compounds) {
+      CandidateTrial trial;
+      trial.effect = std::string(e->name());
+      trial.with = e->needs(search.setup, step.in_model);
+      trial.skipped = "a compound candidate, tried only when no single candidate passes the rules";
+      out.trials.push_back(std::move(trial));
+      out.fitted.emplace_back();
+    }
+  }
+  return out;
+}
+
+// Best first, the skipped after, in library order. Judged by the flight, the step taken is among the candidates
+// that pass every rule and fly best (within flight_tolerance of the best validation velocity or likelihood): the
+// lowest specific-force residual is no reason to fly a worse velocity, nor to stop when that candidate fails the
+// flight's rule while another passes. Among those, and otherwise, the lowest validation residual.
+std::vector<std::size_t> rank_candidates(const Search& search, const std::vector<CandidateTrial>& trials) {
+  const std::vector<bool> flies_best = flying_best(trials, search.judged_by_velocity, search.options);
+  std::vector<std::size_t> order(trials.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    const bool a_tried = trials[a].skipped.empty(), b_tried = trials[b].skipped.empty();
+    if (a_tried != b_tried) return a_tried;
+    if (!a_tried) return false;
+    if (flies_best[a] != flies_best[b]) return static_cast<bool>(flies_best[a]);
+    return trials[a].rmse_validation < trials[b].rmse_validation;
+  });
+  return order;
+}
+
+// One step of the greedy search from `current`: the best candidate, when it passes the rules, becomes `current` and
+// out.steps' last. False when none does, with the candidates in out.last_candidates.
+bool take_step(const Search& search, int step_index, State& current, Diagnosis& out) {
+  Trials trials = fit_and_judge_candidates(open_step(search, step_index, current));
+  const std::vector<std::size_t> order = rank_candidates(search, trials.trials);
+  std::vector<CandidateTrial> sorted;
+  for (std::size_t i : order) sorted.push_back(trials.trials[i]);
+
+  if (trials.tried == 0 || !trials.trials[order.front()].significant) {
+    out.last_candidates = std::move(sorted);
+    return false;
+  }
+  Step s;
+  s.effect = trials.trials[order.front()].effect;
+  s.with = trials.trials[order.front()].with;
+  s.rmse_train_before = current.summary.rmse_train;
+  s.rmse_validation_before = current.summary.rmse_validation;
+  current = std::move(*trials.fitted[order.front()]);  // judged when it was tried
+  s.fit = current.summary;
+  s.params = current.summary.effect_params.back();
+  s.candidates = std::move(sorted);
+  const Model model(search.signals, search.setup, current.effects);
+  s.residual = analyse(model, current, search.validation, search.options);
+  out.steps.push_back(std::move(s));
+  return true;
+}
+
+// The final model, and what structure its validation residual leaves unexplained.
+void describe_final(const Search& search, const State& current, Diagnosis& out) {
   out.final = current.summary;
   out.final_params = current.params;
-  out.final_params.conditions_flight = estimator::flight_identity(series);
+  out.final_params.conditions_flight = estimator::flight_identity(search.series);
   out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
   out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
                                    [](const ResidualAnalysis& a) { return a.white; });
   for (std::size_t i = 0; i < out.final_residual.size(); ++i) {
     for (Unexplained& u : unexplained_structure(out.final_residual[i], out.axes[i])) out.unexplained.push_back(u);
   }
+}
 
-  // The plots' series: the final model's frame, with each model's prediction as measured - residual.
-  const Model final_model(signals, setup, current.effects);
+// The plots' series: the final model's frame, with each model's prediction as measured - residual.
+std::vector<AxisSeries> plot_series(const Search& search, const State& current,
+                                    const AxisValues& base_validation_residual, const std::vector<std::string>& axes) {
+  const Range validation = search.validation;
+  const Model final_model(search.signals, search.setup, current.effects);
   const Evaluation final_eval = final_model.evaluate(current.fit.values, validation);
-  for (std::size_t i = 0; i < setup.axes.size(); ++i) {
+  std::vector<AxisSeries> series;
+  for (std::size_t i = 0; i < search.setup.axes.size(); ++i) {
     AxisSeries a;
-    a.axis = out.axes[i];
-    a.t.assign(signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first),
-               signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first + validation.count));
+    a.axis = axes[i];
+    a.t.assign(search.signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first),
+               search.signals.t.begin() + static_cast<std::ptrdiff_t>(validation.first + validation.count));
     a.measured = final_eval.measured[i];
     a.base_model.resize(validation.count);
     a.final_model.resize(validation.count);
@@ -699,8 +848,33 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
       a.base_model[k] = a.measured[k] - base_validation_residual[i][k];
       a.final_model[k] = a.measured[k] - current.validation_residual[i][k];
     }
-    out.series.push_back(std::move(a));
+    series.push_back(std::move(a));
   }
+  return series;
+}
+
+}  // namespace
+
+Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOptions& requested) {
+  DiagnoseOptions options = requested;
+  if (options.lowpass_hz != 0.0 && !(options.lowpass_hz > 0.0))
+    throw std::invalid_argument("diagnose: the low-pass cutoff must be positive");
+  const Signals signals = prepare_signals(series);
+  ModelSetup setup = set_up_model(signals, options);
+  if (options.max_steps < 0) throw std::invalid_argument("diagnose: the number of steps cannot be negative");
+  Search search = open_search(series, signals, options, setup);
+  Diagnosis out = describe_request(search);
+
+  search.started = std::chrono::steady_clock::now();
+  search.report_progress(0, "base", false, 0, 1);
+  State current = fit_plausible_base(search, setup, out.warnings);
+  describe_base(search, current, out);
+  const AxisValues base_validation_residual = current.validation_residual;
+  for (int step = 0; step < options.max_steps; ++step) {
+    if (!take_step(search, step, current, out)) break;
+  }
+  describe_final(search, current, out);
+  out.series = plot_series(search, current, base_validation_residual, out.axes);
   return out;
 }
 
