@@ -14,7 +14,6 @@
 #include <memory>
 #include <numbers>
 #include <stdexcept>
-#include <thread>
 
 #include "diagnose/live_model.hpp"
 #include "diagnose/lowpass.hpp"
@@ -587,14 +586,10 @@ void Model::scan_drag_start(std::vector<double>& p, std::span<const std::size_t>
       }
     }
   };
+  const std::size_t workers = std::min<std::size_t>(std::max(1u, threads), kStarts);
   std::vector<std::unique_ptr<Model>> others;
-  std::vector<std::thread> helpers;
-  for (unsigned t = 1; t < std::min<std::size_t>(std::max(1u, threads), kStarts); ++t) {
-    others.push_back(std::make_unique<Model>(signals(), setup(), effects()));
-    helpers.emplace_back(work, std::cref(*others.back()));
-  }
-  work(*this);
-  for (std::thread& t : helpers) t.join();
+  for (std::size_t t = 1; t < workers; ++t) others.push_back(std::make_unique<Model>(signals(), setup(), effects()));
+  estimator::on_threads(workers, [&](std::size_t w) { work(w == 0 ? *this : *others[w - 1]); });
   double best_rmse = std::numeric_limits<double>::infinity(), best = p.empty() ? 0.0 : p[indices.front()];
   for (std::size_t v = 0; v < kStarts; ++v) {
     if (failed[v]) std::rethrow_exception(failed[v]);
@@ -673,10 +668,7 @@ class ForwardDifferenceCost final : public ceres::CostFunction {
         if (task > 0) shifted[j] = x[j];
       }
     };
-    std::vector<std::thread> helpers;
-    for (std::size_t w = 1; w < models_.size(); ++w) helpers.emplace_back(tasks, w);
-    tasks(0);
-    for (std::thread& t : helpers) t.join();
+    estimator::on_threads(models_.size(), tasks);
     if (thrown[0]) std::rethrow_exception(thrown[0]);
     if (!finite[0]) return false;
     for (const std::exception_ptr& e : thrown) {
@@ -785,8 +777,6 @@ void standard_errors(ceres::Problem& problem, const Model& model, std::size_t re
 }
 
 }  // namespace
-
-unsigned cores() { return std::max(1u, std::thread::hardware_concurrency()); }
 
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations, FitStop stop,
                unsigned jacobian_threads) {

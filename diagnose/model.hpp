@@ -16,6 +16,7 @@
 
 #include "diagnose/effects/effect.hpp"
 #include "diagnose/signals.hpp"
+#include "estimator/on_threads.hpp"
 #include "estimator/params.hpp"
 
 namespace imubridge::diagnose {
@@ -142,7 +143,7 @@ struct FitOutcome {
 enum class FitStop { cost, parameter_precision };
 
 // The cores fits may spread over (never 0).
-unsigned cores();
+using estimator::cores;
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
 // ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does. When the model

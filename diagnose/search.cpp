@@ -10,7 +10,6 @@
 #include <limits>
 #include <numbers>
 #include <stdexcept>
-#include <thread>
 #include <tuple>
 
 #include "diagnose/effects/library.hpp"
@@ -666,17 +665,13 @@ void fit_candidates_in_parallel(const StepContext& step, const std::vector<const
   const std::size_t threads = std::min<std::size_t>(cores(), untried.size());
   // The cores the candidates leave idle (a step with fewer candidates than cores) share each fit's Jacobian.
   const auto jacobian_threads = static_cast<unsigned>(cores() / std::max<std::size_t>(threads, 1));
-  const auto work = [&] {
+  estimator::on_threads(threads, [&](std::size_t) {
     for (std::size_t i = next++; i < untried.size(); i = next++) {
       step.search.report_progress(step.step + 1, untried[i]->name(), false, done.load(), untried.size());
       std::tie(out.trials[first + i], out.fitted[first + i]) = try_candidate(step, *untried[i], jacobian_threads);
       step.search.report_progress(step.step + 1, untried[i]->name(), true, ++done, untried.size());
     }
-  };
-  std::vector<std::thread> pool;
-  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  });
 }
 
 // What a step must beat: the current model's validation RMSE and what users fly with, before this step: the

@@ -11,10 +11,10 @@
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
-#include <thread>
 #include <utility>
 
 #include "estimator/constants.hpp"
+#include "estimator/on_threads.hpp"
 #include "estimator/velocity.hpp"
 
 namespace imubridge::estimator {
@@ -84,17 +84,11 @@ std::vector<Value> cubic_slope(std::span<const double> t, std::span<const Value>
   // runs come in time order, so its window's search goes on from its previous run's.
   constexpr std::size_t kPerRun = 4096;
   std::atomic<std::size_t> next{0};
-  const auto work = [&] {
+  on_threads(std::min<std::size_t>(cores(), (t.size() + kPerRun - 1) / kPerRun), [&](std::size_t) {
     std::size_t first = 0, last = 0;
     for (std::size_t begin = next.fetch_add(kPerRun); begin < t.size(); begin = next.fetch_add(kPerRun))
       cubic_slope_of(t, x, half_window, begin, std::min(begin + kPerRun, t.size()), first, last, out);
-  };
-  std::vector<std::thread> helpers;
-  const std::size_t threads =
-      std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), (t.size() + kPerRun - 1) / kPerRun);
-  for (std::size_t i = 1; i < threads; ++i) helpers.emplace_back(work);
-  work();
-  for (std::thread& helper : helpers) helper.join();
+  });
   return out;
 }
 

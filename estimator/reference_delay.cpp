@@ -8,11 +8,11 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
-#include <thread>
 #include <utility>
 #include <vector>
 
 #include "estimator/constants.hpp"
+#include "estimator/on_threads.hpp"
 
 namespace imubridge::estimator {
 namespace {
@@ -171,15 +171,11 @@ std::vector<double> correlations(const ImuSeries& series, const std::vector<Box>
   for (std::size_t b = 0; b < boxes.size(); ++b) x.segment<2>(static_cast<Eigen::Index>(2 * b)) = boxes[b].accel;
   std::vector<double> rho(static_cast<std::size_t>(2 * half + 1));
   std::atomic<int> next{-half};
-  const auto work = [&] {
+  on_threads(std::min(cores(), 8u), [&](std::size_t) {
     LagScratch scratch(boxes.size());
     for (int first = next.fetch_add(kLagsPerRun); first <= half; first = next.fetch_add(kLagsPerRun))
       correlate_lags(imu, boxes, x, first, std::min(first + kLagsPerRun, half + 1), half, rho, scratch);
-  };
-  std::vector<std::thread> helpers;
-  for (unsigned i = 1; i < std::clamp(std::thread::hardware_concurrency(), 1u, 8u); ++i) helpers.emplace_back(work);
-  work();
-  for (std::thread& t : helpers) t.join();
+  });
   return rho;
 }
 
