@@ -6,7 +6,10 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 #include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
@@ -53,6 +56,25 @@ void append_gap_events(store::Store& store, std::int64_t session, std::int64_t l
     store.append_event(session,
                        {.link_id = link, .mono_ns = g.from_ns, .wall_ns = g.from_ns, .kind = "gap", .detail = text});
   }
+}
+
+void ImportedSamples::add(double t_s, std::int64_t at_ns, const std::array<double, 3>& a,
+                          const std::array<double, 3>& g) {
+  t.push_back(t_s);
+  t_ns.push_back(at_ns);
+  accel.emplace_back(a[0], a[1], a[2]);
+  gyro.emplace_back(g[0], g[1], g[2]);
+}
+
+Gaps ImportedSamples::record_gaps(store::Store& store, std::int64_t session, std::int64_t link, double threshold_s,
+                                  std::int64_t session_start_ns) const {
+  Gaps gaps = find_gaps(t_ns, threshold_s, session_start_ns);
+  append_gap_events(store, session, link, gaps);
+  return gaps;
+}
+
+estimator::AxesResolution ImportedSamples::resolve_axes(const estimator::ImuAxes& declared) const {
+  return estimator::resolve_axes(declared, estimator::detect_up(t, accel, gyro));
 }
 
 bool finite(const std::array<double, 3>& v) {
@@ -141,29 +163,44 @@ ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::st
           .file_size = progress && std::filesystem::exists(file) ? std::filesystem::file_size(file) : 0};
 }
 
-void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result) {
-  const auto calibration = import_calibration(settings.accel_lsb, settings.gyro_lsb);
-  const std::vector<ImuRow>& rows = log.rows;
+namespace {
+
+// The session's events at log times; the session ends with the last of them, or its last sample.
+struct SessionEvents {
+  store::Store& store;
+  std::int64_t session = 0;
+  std::int64_t end = 0;
+
+  void add(std::optional<std::int64_t> on, std::int64_t t, std::string kind, std::int64_t count, std::string detail) {
+    store.append_event(session, {.link_id = on,
+                                 .mono_ns = t,
+                                 .wall_ns = t,
+                                 .kind = std::move(kind),
+                                 .count = count,
+                                 .detail = std::move(detail)});
+    end = std::max(end, t);
+  }
+};
+
+// What the log says of itself, into the result before anything is recorded.
+void take_log_summary(ImuLog& log, ImuLogImportResult& result) {
   result.imu_source = log.imu_source;
   result.skipped = std::move(log.skipped);
   result.reference_skipped = std::move(log.reference_skipped);
   result.reference_rows = log.reference.size();
   result.damage = log.damage;
-  result.first_us = rows.front().t_us;
-  result.last_us = rows.back().t_us;
+  result.first_us = log.rows.front().t_us;
+  result.last_us = log.rows.back().t_us;
+}
 
-  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
-      store, {.kind = "import", .source = log.source, .config = log.config, .started_wall_ns = ns(result.first_us)},
-      {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, settings.imu_axes}, .device = log.device}});
-  result.session = recorded.id;
-  const std::int64_t link = recorded.store_links[0];
-  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+// Every row, encoded as a frame, through the session engine without estimation, and the link finished at the last;
+// the samples and values clipped to the frame's range counted.
+ImportedSamples record_rows(store::Store& store, const std::vector<ImuRow>& rows, pipeline::RecordAndDecode& recording,
+                            const protocol::Calibration& calibration, const ImuLogSettings& settings,
+                            ImuLogImportResult& result) {
   pipeline::SessionEngine engine(nullptr);
-
   std::vector<std::uint8_t> bytes;
-  std::vector<double> axes_t;
-  std::vector<std::int64_t> t_ns;
-  std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
+  ImportedSamples samples;
   const auto progress = [&] {
     settings.progress({.bytes_read = settings.file_size, .bytes_total = settings.file_size, .samples = result.samples});
   };
@@ -178,52 +215,61 @@ void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& setti
                           bytes);
     engine.on_chunk(0, recording, bytes, ns(row.t_us), ns(row.t_us));
     ++result.samples;
-    t_ns.push_back(ns(row.t_us));
-    axes_t.push_back(static_cast<double>(row.t_us - result.first_us) * 1e-6);
-    axes_accel.emplace_back(row.accel[0], row.accel[1], row.accel[2]);
-    axes_gyro.emplace_back(row.gyro[0], row.gyro[1], row.gyro[2]);
+    samples.add(static_cast<double>(row.t_us - result.first_us) * 1e-6, ns(row.t_us), row.accel, row.gyro);
     store.commit_if_due(std::chrono::steady_clock::now());
     if (settings.progress && result.samples % kImportProgressEvery == 0) progress();
   }
   if (settings.progress) progress();
   const std::int64_t last = ns(result.last_us);
-  std::int64_t end = last;
-  engine.finish_link(0, recording, end, end);
+  engine.finish_link(0, recording, last, last);
   engine.finish();
-  for (const auto& row : log.reference) store.append_reference(result.session, row);
+  return samples;
+}
 
-  const auto event = [&](std::optional<std::int64_t> on, std::int64_t t, std::string kind, std::int64_t count,
-                         std::string detail) {
-    store.append_event(result.session, {.link_id = on,
-                                        .mono_ns = t,
-                                        .wall_ns = t,
-                                        .kind = std::move(kind),
-                                        .count = count,
-                                        .detail = std::move(detail)});
-    end = std::max(end, t);
-  };
-  for (LogEvent& e : log.events) event(std::nullopt, ns(e.t_us), std::move(e.kind), 1, std::move(e.detail));
+// The log's own events, then what the import left out, clipped or found damaged, at the last sample.
+void record_import_events(SessionEvents& events, std::int64_t link, ImuLog& log, const ImuLogImportResult& result) {
+  const std::int64_t last = ns(result.last_us);
+  for (LogEvent& e : log.events) events.add(std::nullopt, ns(e.t_us), std::move(e.kind), 1, std::move(e.detail));
   for (const auto& [reason, count] : result.skipped) {
-    event(link, last, "import_skipped", static_cast<std::int64_t>(count),
-          log.file + ": " + std::to_string(count) + " " + result.imu_source + " records: " + reason);
+    events.add(link, last, "import_skipped", static_cast<std::int64_t>(count),
+               log.file + ": " + std::to_string(count) + " " + result.imu_source + " records: " + reason);
   }
   for (const auto& [reason, count] : result.reference_skipped) {
-    event(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
-          log.file + ": " + std::to_string(count) + " reference rows: " + reason);
+    events.add(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
+               log.file + ": " + std::to_string(count) + " reference rows: " + reason);
   }
   if (result.clipped > 0) {
-    event(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
-          log.file + ": " + std::to_string(result.clipped) + " samples beyond the frames' range, clipped");
+    events.add(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
+               log.file + ": " + std::to_string(result.clipped) + " samples beyond the frames' range, clipped");
   }
   if (log.damage) {
-    event(std::nullopt, last, "import_damaged", 1,
-          log.file + ": read up to the damage, " + *log.damage + "; everything before it is imported");
+    events.add(std::nullopt, last, "import_damaged", 1,
+               log.file + ": read up to the damage, " + *log.damage + "; everything before it is imported");
   }
-  result.gaps = find_gaps(t_ns, settings.gap_threshold_s, t_ns.front());
-  append_gap_events(store, result.session, link, result.gaps);
-  result.axes = estimator::resolve_axes(settings.declared_axes, estimator::detect_up(axes_t, axes_accel, axes_gyro));
-  if (result.axes.mismatch) event(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
-  pipeline::end_recorded_session(store, result.session, end);
+}
+
+}  // namespace
+
+void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result) {
+  const auto calibration = import_calibration(settings.accel_lsb, settings.gyro_lsb);
+  take_log_summary(log, result);
+
+  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+      store, {.kind = "import", .source = log.source, .config = log.config, .started_wall_ns = ns(result.first_us)},
+      {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, settings.imu_axes}, .device = log.device}});
+  result.session = recorded.id;
+  const std::int64_t link = recorded.store_links[0];
+  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
+  const ImportedSamples samples = record_rows(store, log.rows, recording, calibration, settings, result);
+  for (const auto& row : log.reference) store.append_reference(result.session, row);
+
+  const std::int64_t last = ns(result.last_us);
+  SessionEvents events{.store = store, .session = result.session, .end = last};
+  record_import_events(events, link, log, result);
+  result.gaps = samples.record_gaps(store, result.session, link, settings.gap_threshold_s, samples.t_ns.front());
+  result.axes = samples.resolve_axes(settings.declared_axes);
+  if (result.axes.mismatch) events.add(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
+  pipeline::end_recorded_session(store, result.session, events.end);
 }
 
 }  // namespace imubridge::replay

@@ -48,6 +48,21 @@ void append_gap_events(store::Store& store, std::int64_t session, std::int64_t l
 // Throws std::invalid_argument naming the option when the threshold is not positive and finite.
 void check_gap_threshold(double threshold_s);
 
+// The IMU's samples as an import writes them: their times, for the holes, and their values, for the check of the
+// declared axes against gravity.
+struct ImportedSamples {
+  std::vector<double> t{};  // s since the first, as the import counts it
+  std::vector<std::int64_t> t_ns{};
+  std::vector<Eigen::Vector3d> accel{}, gyro{};
+
+  void add(double t_s, std::int64_t at_ns, const std::array<double, 3>& a, const std::array<double, 3>& g);
+  // The holes over `threshold_s` (find_gaps), each as a `gap` event on `link` (append_gap_events).
+  Gaps record_gaps(store::Store& store, std::int64_t session, std::int64_t link, double threshold_s,
+                   std::int64_t session_start_ns) const;
+  // The declared axes checked against the gravity in these samples.
+  estimator::AxesResolution resolve_axes(const estimator::ImuAxes& declared) const;
+};
+
 struct ImuRow {
   std::uint64_t t_us = 0;
   std::array<double, 3> accel{}, gyro{};
