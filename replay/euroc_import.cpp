@@ -103,6 +103,122 @@ void record_lines(store::Store& store, std::int64_t session, std::optional<std::
   }
 }
 
+// The reference file named, else EuRoC's ground truth when the dataset has one.
+std::optional<ReferenceFile> reference_file(const EurocImportOptions& options) {
+  std::optional<ReferenceFile> reference = options.reference;
+  if (const fs::path gt = options.dir / "mav0" / "state_groundtruth_estimate0" / "data.csv";
+      !reference && fs::exists(gt)) {
+    reference = ReferenceFile{gt, ReferenceFormat::euroc_gt};
+  }
+  return reference;
+}
+
+nlohmann::json session_config(const EurocImportOptions& options, const std::optional<ReferenceFile>& reference,
+                              bool velocity_derived) {
+  return {{"import",
+           {{"format", "euroc"},
+            {"dir", options.dir.string()},
+            {"reference", reference ? reference->path.string() : ""},
+            {"velocity_derived", velocity_derived},
+            {"accel_lsb", options.accel_lsb},
+            {"gyro_lsb", options.gyro_lsb}}}};
+}
+
+// The IMU rows, as read_table hands them, encoded as frames through the session engine. The session begins with the
+// first usable row, so a file without one leaves nothing behind. The dataset's timestamps (Unix time, ns) serve as
+// both receive clocks; the device clock starts at 0 with the first row. The frames go through the session engine
+// without estimation: an import has no parameters (a replay estimates).
+class ImuRecording {
+ public:
+  ImuRecording(store::Store& store, const EurocImportOptions& options, const protocol::Calibration& calibration,
+               nlohmann::json config, EurocImportResult& result)
+      : store_(store),
+        options_(options),
+        calibration_(calibration),
+        config_(std::move(config)),
+        result_(result),
+        accel_beyond_("accel " + range_text(options.accel_lsb, "m/s^2")),
+        gyro_beyond_("gyro " + range_text(options.gyro_lsb, "rad/s")) {}
+
+  void add(const TableRow& row) {
+    if (!recording_) begin(row.t_ns);
+    const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
+    const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
+    if (beyond_frame_range(accel, options_.accel_lsb)) result_.clipped.add(row.line, accel_beyond_);
+    if (beyond_frame_range(gyro, options_.gyro_lsb)) result_.clipped.add(row.line, gyro_beyond_);
+    const std::uint64_t since_t0 = elapsed_ns(t0_, row.t_ns);
+    bytes_.clear();
+    protocol::imu::encode({.seq = static_cast<std::uint16_t>(result_.imu.rows),
+                           .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
+                           .payload = calibration_.to_counts(accel, gyro, {}, 0.0)},
+                          bytes_);
+    engine_.on_chunk(0, *recording_, bytes_, row.t_ns, row.t_ns);
+    ++result_.imu.rows;
+    last_t_ = row.t_ns;
+    samples_.add(static_cast<double>(since_t0) * 1e-9, row.t_ns, accel, gyro);
+    store_.commit_if_due(std::chrono::steady_clock::now());
+  }
+
+  bool begun() const { return recording_.has_value(); }
+  // Finishes the link at the last row's time.
+  void finish() {
+    engine_.finish_link(0, *recording_, last_t_, last_t_);
+    engine_.finish();
+  }
+  std::int64_t link() const { return link_; }
+  std::int64_t first_t() const { return t0_; }
+  std::int64_t last_t() const { return last_t_; }
+  const ImportedSamples& samples() const { return samples_; }
+
+ private:
+  void begin(std::int64_t t0) {
+    t0_ = t0;
+    pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+        store_,
+        {.kind = "import",
+         .source = "EuRoC dataset " + options_.dir.string(),
+         .config = config_,
+         .started_wall_ns = t0_},
+        {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration_, options_.imu_axes},
+          .device = "EuRoC imu0, " + result_.imu.path.string()}});
+    result_.session = recorded.id;
+    link_ = recorded.store_links[0];
+    recording_.emplace(std::move(recorded.recorders[0]));
+  }
+
+  store::Store& store_;
+  const EurocImportOptions& options_;
+  const protocol::Calibration& calibration_;
+  const nlohmann::json config_;
+  EurocImportResult& result_;
+  const std::string accel_beyond_, gyro_beyond_;
+  pipeline::SessionEngine engine_{nullptr};
+  std::optional<pipeline::RecordAndDecode> recording_;
+  std::int64_t link_ = 0, t0_ = 0, last_t_ = 0;
+  std::vector<std::uint8_t> bytes_;
+  ImportedSamples samples_;
+};
+
+// How far reading the IMU file is, by its stream's position.
+void report_progress(std::ifstream& imu, std::uint64_t imu_size, std::uint64_t rows,
+                     const ImportProgressCallback& progress) {
+  const std::streamoff at = imu.tellg();
+  if (at >= 0) {
+    progress(
+        {.bytes_read = std::min(static_cast<std::uint64_t>(at), imu_size), .bytes_total = imu_size, .samples = rows});
+  }
+}
+
+// What the import left out or clipped, as events at the last row.
+void record_import_events(store::Store& store, const EurocImportResult& result, std::int64_t link, std::int64_t t_ns) {
+  record_lines(store, result.session, link, t_ns, "import_skipped", result.imu.path, result.imu.skipped);
+  record_lines(store, result.session, link, t_ns, "import_clipped", result.imu.path, result.clipped);
+  if (result.reference) {
+    record_lines(store, result.session, std::nullopt, t_ns, "import_skipped", result.reference->path,
+                 result.reference->skipped);
+  }
+}
+
 }  // namespace
 
 ReferenceFormat parse_reference_format(std::string_view name) {
@@ -129,11 +245,7 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   result.imu.path = options.dir / "mav0" / "imu0" / "data.csv";
   std::ifstream imu = open_input(result.imu.path);
   const std::uint64_t imu_size = options.progress ? fs::file_size(result.imu.path) : 0;
-  std::optional<ReferenceFile> reference = options.reference;
-  if (const fs::path gt = options.dir / "mav0" / "state_groundtruth_estimate0" / "data.csv";
-      !reference && fs::exists(gt)) {
-    reference = ReferenceFile{gt, ReferenceFormat::euroc_gt};
-  }
+  const std::optional<ReferenceFile> reference = reference_file(options);
   std::vector<store::ReferenceRow> reference_rows;
   if (reference) {
     result.reference = ImportedFile{.path = reference->path};
@@ -141,86 +253,28 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
     result.velocity_derived = reference->format == ReferenceFormat::tum;
   }
 
-  nlohmann::json config = {{"import",
-                            {{"format", "euroc"},
-                             {"dir", options.dir.string()},
-                             {"reference", reference ? reference->path.string() : ""},
-                             {"velocity_derived", result.velocity_derived},
-                             {"accel_lsb", options.accel_lsb},
-                             {"gyro_lsb", options.gyro_lsb}}}};
-  std::vector<double> axes_t;  // the rows as read, for the gravity check
-  std::vector<std::int64_t> t_ns;  // and for the holes
-  std::vector<Eigen::Vector3d> axes_accel, axes_gyro;
-  // The session begins with the first usable row, so a file without one leaves nothing behind. The dataset's
-  // timestamps (Unix time, ns) serve as both receive clocks; the device clock starts at 0 with the first row. The
-  // frames go through the session engine without estimation: an import has no parameters (a replay estimates).
-  pipeline::SessionEngine engine(nullptr);
-  std::optional<pipeline::RecordAndDecode> recording;
-  std::int64_t link = 0, t0 = 0, last_t = 0;
-  std::vector<std::uint8_t> bytes;
-  const std::string accel_beyond = "accel " + range_text(options.accel_lsb, "m/s^2");
-  const std::string gyro_beyond = "gyro " + range_text(options.gyro_lsb, "rad/s");
+  ImuRecording recording(store, options, calibration, session_config(options, reference, result.velocity_derived),
+                         result);
   read_table(
       imu, {',', 0, 7, 7},
       [&](const TableRow& row) -> std::optional<std::string> {
-        if (!recording) {
-          t0 = row.t_ns;
-          pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
-              store,
-              {.kind = "import",
-               .source = "EuRoC dataset " + options.dir.string(),
-               .config = config,
-               .started_wall_ns = t0},
-              {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, options.imu_axes},
-                .device = "EuRoC imu0, " + result.imu.path.string()}});
-          result.session = recorded.id;
-          link = recorded.store_links[0];
-          recording.emplace(std::move(recorded.recorders[0]));
-        }
-        const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
-        const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
-        if (beyond_frame_range(accel, options.accel_lsb)) result.clipped.add(row.line, accel_beyond);
-        if (beyond_frame_range(gyro, options.gyro_lsb)) result.clipped.add(row.line, gyro_beyond);
-        const std::uint64_t since_t0 = elapsed_ns(t0, row.t_ns);
-        bytes.clear();
-        protocol::imu::encode({.seq = static_cast<std::uint16_t>(result.imu.rows),
-                               .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
-                               .payload = calibration.to_counts(accel, gyro, {}, 0.0)},
-                              bytes);
-        engine.on_chunk(0, *recording, bytes, row.t_ns, row.t_ns);
-        ++result.imu.rows;
-        last_t = row.t_ns;
-        axes_t.push_back(static_cast<double>(since_t0) * 1e-9);
-        t_ns.push_back(row.t_ns);
-        axes_accel.emplace_back(accel[0], accel[1], accel[2]);
-        axes_gyro.emplace_back(gyro[0], gyro[1], gyro[2]);
-        store.commit_if_due(std::chrono::steady_clock::now());
+        recording.add(row);
         if (options.progress && result.imu.rows % kImportProgressEvery == 0 && !imu.eof()) {
-          const std::streamoff at = imu.tellg();
-          if (at >= 0) {
-            options.progress({.bytes_read = std::min(static_cast<std::uint64_t>(at), imu_size),
-                              .bytes_total = imu_size,
-                              .samples = result.imu.rows});
-          }
+          report_progress(imu, imu_size, result.imu.rows, options.progress);
         }
         return std::nullopt;
       },
       result.imu.skipped);
-  if (!recording) throw std::invalid_argument(no_rows_message(result.imu));
+  if (!recording.begun()) throw std::invalid_argument(no_rows_message(result.imu));
   if (options.progress) options.progress({.bytes_read = imu_size, .bytes_total = imu_size, .samples = result.imu.rows});
 
-  engine.finish_link(0, *recording, last_t, last_t);
-  engine.finish();
+  recording.finish();
+  const std::int64_t link = recording.link(), last_t = recording.last_t();
   for (const auto& row : reference_rows) store.append_reference(result.session, row);
-  record_lines(store, result.session, link, last_t, "import_skipped", result.imu.path, result.imu.skipped);
-  record_lines(store, result.session, link, last_t, "import_clipped", result.imu.path, result.clipped);
-  if (result.reference) {
-    record_lines(store, result.session, std::nullopt, last_t, "import_skipped", result.reference->path,
-                 result.reference->skipped);
-  }
-  result.gaps = find_gaps(t_ns, options.gap_threshold_s, t0);
-  append_gap_events(store, result.session, link, result.gaps);
-  result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(axes_t, axes_accel, axes_gyro));
+  record_import_events(store, result, link, last_t);
+  result.gaps =
+      recording.samples().record_gaps(store, result.session, link, options.gap_threshold_s, recording.first_t());
+  result.axes = recording.samples().resolve_axes(declared_axes);
   if (result.axes.mismatch) {
     store.append_event(result.session, {.link_id = link,
                                         .mono_ns = last_t,
