@@ -182,19 +182,15 @@ std::optional<pipeline::MavlinkReference::Choice> reference_choice(const Survey&
   return pipeline::MavlinkReference::Choice{.sender = from, .quaternions = s.quaternions.contains(from)};
 }
 
-// The samples the engine decodes: counted, and kept for the check of the declared IMU axes against gravity.
-class AxesSink final : public pipeline::SessionSink {
+// The samples the engine decodes: counted, and kept for the holes and the check of the declared IMU axes against
+// gravity.
+class SamplesSink final : public pipeline::SessionSink {
  public:
-  explicit AxesSink(std::int64_t t0_ns) : t0_ns_(t0_ns) {}
+  explicit SamplesSink(std::int64_t t0_ns) : t0_ns_(t0_ns) {}
   void on_sample(std::size_t, const protocol::Sample& s, std::span<const store::Estimate>, std::int64_t) override {
-    t.push_back(static_cast<double>(s.recv_mono_ns - t0_ns_) * 1e-9);
-    t_ns.push_back(s.recv_mono_ns);
-    accel.emplace_back(s.accel[0], s.accel[1], s.accel[2]);
-    gyro.emplace_back(s.gyro[0], s.gyro[1], s.gyro[2]);
+    samples.add(static_cast<double>(s.recv_mono_ns - t0_ns_) * 1e-9, s.recv_mono_ns, s.accel, s.gyro);
   }
-  std::vector<double> t;
-  std::vector<std::int64_t> t_ns;
-  std::vector<Eigen::Vector3d> accel, gyro;
+  ImportedSamples samples;
 
  private:
   std::int64_t t0_ns_;
@@ -245,17 +241,15 @@ nlohmann::json metadata(const tlog::Log& log, const Survey& s, const TlogImportO
             {"damage", damage}}}};
 }
 
-}  // namespace
-
-TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& options) {
-  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+// The options checked before anything is read; the calibration RAW_IMU's counts are decoded with (the other IMU
+// messages carry SI-scaled values and need none).
+protocol::Calibration checked_calibration(const TlogImportOptions& options) {
   if (options.accel_lsb.has_value() != options.gyro_lsb.has_value()) {
     throw std::invalid_argument("RAW_IMU needs both resolutions: --accel-lsb and --gyro-lsb");
   }
   check_gap_threshold(options.gap_threshold_s);
-  const bool raw_calibrated = options.accel_lsb.has_value();
-  protocol::Calibration calibration;  // for RAW_IMU only; the other IMU messages carry SI-scaled values
-  if (raw_calibrated) {
+  protocol::Calibration calibration;
+  if (options.accel_lsb) {
     calibration = import_calibration(*options.accel_lsb, *options.gyro_lsb);
     calibration.mag.scale.fill(kMicroteslaPerMilligauss);
     if (!calibration.valid() || !(*options.accel_lsb > 0) || !(*options.gyro_lsb > 0)) {
@@ -266,50 +260,54 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
     throw std::invalid_argument("--imu-message " + *options.imu_message +
                                 ": not an IMU message (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, RAW_IMU)");
   }
-  const tlog::Log log = tlog::read_file(options.file);
-  const std::string file = options.file.string();
+  return calibration;
+}
 
-  TlogImportResult result;
-  // The session's clock is the log's, held still while the log's time goes back (a ground station's clock set back),
-  // so chunks, samples, reference and events keep one increasing time line; the wall clock is the log's as written.
+// The session's clock is the log's, held still while the log's time goes back (a ground station's clock set back),
+// so chunks, samples, reference and events keep one increasing time line; the wall clock is the log's as written.
+std::vector<std::int64_t> session_clock(const tlog::Log& log) {
   std::vector<std::int64_t> mono_ns(log.records.size());
   for (std::size_t i = 0; i < log.records.size(); ++i) {
     mono_ns[i] = i == 0 ? ns(log.records[i].time_us) : std::max(mono_ns[i - 1], ns(log.records[i].time_us));
   }
-  const Survey s = survey(log);
-  const std::optional<mavlink::ImuSource> imu = choose_imu(s, options, raw_calibrated);
-  if (!imu) {
-    std::string why;
-    if (s.imus.empty()) {
-      why = "no IMU messages (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3 or RAW_IMU) in its " +
-            std::to_string(log.records.size()) + " records";
-    } else if (options.imu_message) {
-      why = "no " + *options.imu_message + " messages" +
-            (raw_calibrated || *options.imu_message != "RAW_IMU"
-                 ? ""
-                 : " that can be used without --accel-lsb and --gyro-lsb") +
-            " (its IMUs: " + imu_list(s) + ")";
-    } else {
-      why =
-          "its only IMU messages are RAW_IMU, which carry counts: give their resolution with --accel-lsb and "
-          "--gyro-lsb (ArduPilot sends mG and mrad/s: 0.00980665 and 0.001)";
-    }
-    throw std::invalid_argument(file + ": " + why +
-                                (log.damage.empty() ? "" : "; the file is damaged: " + *log.damage_summary()));
+  return mono_ns;
+}
+
+// Why no IMU can be imported, for the error.
+std::string no_imu_message(const std::string& file, const tlog::Log& log, const Survey& s,
+                           const TlogImportOptions& options, bool raw_calibrated) {
+  std::string why;
+  if (s.imus.empty()) {
+    why = "no IMU messages (HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3 or RAW_IMU) in its " +
+          std::to_string(log.records.size()) + " records";
+  } else if (options.imu_message) {
+    why =
+        "no " + *options.imu_message + " messages" +
+        (raw_calibrated || *options.imu_message != "RAW_IMU" ? ""
+                                                             : " that can be used without --accel-lsb and --gyro-lsb") +
+        " (its IMUs: " + imu_list(s) + ")";
+  } else {
+    why =
+        "its only IMU messages are RAW_IMU, which carry counts: give their resolution with --accel-lsb and "
+        "--gyro-lsb (ArduPilot sends mG and mrad/s: 0.00980665 and 0.001)";
   }
-  result.imu_source = mavlink::describe(*imu);
+  return file + ": " + why + (log.damage.empty() ? "" : "; the file is damaged: " + *log.damage_summary());
+}
+
+// Every IMU's messages, those of the IMUs not imported as skipped, and the imported one's clipped values.
+void count_imus(const Survey& s, const mavlink::ImuSource& imu, bool raw_calibrated, TlogImportResult& result) {
+  result.imu_source = mavlink::describe(imu);
   for (const auto& [source, count] : s.imus) {
     result.imu_messages[mavlink::describe(source)] = count;
-    if (source == *imu) continue;
+    if (source == imu) continue;
     const bool raw_without = source.msgid == mavlink::RawImu::kId && !raw_calibrated;
     result.skipped[mavlink::describe(source) + (raw_without ? ": RAW_IMU counts without --accel-lsb and --gyro-lsb"
                                                             : ": not the IMU imported")] += count;
   }
-  if (const auto c = s.clipped.find(*imu); c != s.clipped.end()) result.clipped = c->second;
-  // The reference rows are built as the frames are recorded, by the recorder (as on a live link).
-  std::optional<pipeline::MavlinkReference::Choice> reference;
-  if (options.reference) reference = reference_choice(s, Component{imu->sysid, imu->compid});
-  if (reference) result.reference_source = pipeline::MavlinkReference(*reference).source();
+  if (const auto c = s.clipped.find(imu); c != s.clipped.end()) result.clipped = c->second;
+}
+
+void describe_log(const tlog::Log& log, TlogImportResult& result) {
   result.records = log.records.size();
   result.unverified = log.unverified;
   result.unverified_summary = log.unverified_summary();
@@ -317,60 +315,67 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   result.damaged_bytes = log.damaged_bytes();
   result.first_us = log.records.front().time_us;
   result.last_us = log.records.back().time_us;
+}
 
-  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
-      store,
-      {.kind = "import",
-       .source = "MAVLink telemetry log " + file,
-       .config = metadata(log, s, options, *imu, result.reference_source),
-       .started_wall_ns = ns(result.first_us)},
-      {{.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
-        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source,
-        .mavlink_reference = reference}});
-  result.session = recorded.id;
-  const std::int64_t link = recorded.store_links[0];
-  // Every frame through the session engine without estimation: an import has no parameters (a replay estimates).
+// Every frame through the session engine without estimation (an import has no parameters: a replay estimates), the
+// link finished at the last record; the reference's rows counted as its recorder built them.
+ImportedSamples record_frames(store::Store& store, const tlog::Log& log, const std::vector<std::int64_t>& mono_ns,
+                              pipeline::RecordedSession& recorded, const TlogImportOptions& options,
+                              TlogImportResult& result) {
   const pipeline::LinkRecorder& recorder = *recorded.recorders[0];
   pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
   pipeline::SessionEngine engine(nullptr);
-  AxesSink samples(mono_ns.front());
-  engine.add_sink(samples);
+  SamplesSink sink(mono_ns.front());
+  engine.add_sink(sink);
   for (std::size_t i = 0; i < log.records.size(); ++i) {
     engine.on_chunk(0, recording, log.frame(log.records[i]), mono_ns[i], ns(log.records[i].time_us));
     store.commit_if_due(std::chrono::steady_clock::now());
     if (options.progress && (i + 1) % kImportProgressEvery == 0) {
       options.progress({.bytes_read = log.records[i].offset + tlog::kTimeSize + log.records[i].size,
                         .bytes_total = log.bytes.size(),
-                        .samples = samples.t.size()});
+                        .samples = sink.samples.t.size()});
     }
   }
   if (options.progress) {
-    options.progress({.bytes_read = log.bytes.size(), .bytes_total = log.bytes.size(), .samples = samples.t.size()});
+    options.progress(
+        {.bytes_read = log.bytes.size(), .bytes_total = log.bytes.size(), .samples = sink.samples.t.size()});
   }
-  const std::int64_t end_mono = mono_ns.back();
-  const std::int64_t end_wall = ns(log.records.back().time_us);
-  engine.finish_link(0, recording, end_mono, end_wall);
+  engine.finish_link(0, recording, mono_ns.back(), ns(log.records.back().time_us));
   engine.finish();
-  result.samples = samples.t.size();
+  result.samples = sink.samples.t.size();
   if (const pipeline::MavlinkReference* built = recorder.mavlink_reference()) {
     result.reference_rows = built->rows();
     result.reference_skipped = built->skipped();
   }
   if (result.reference_rows == 0) result.reference_source.clear();
+  return std::move(sink.samples);
+}
 
-  const auto event = [&](std::optional<std::int64_t> on, std::size_t record, std::string kind, std::int64_t count,
-                         std::string detail) {
-    store.append_event(result.session, {.link_id = on,
-                                        .mono_ns = mono_ns[record],
-                                        .wall_ns = ns(log.records[record].time_us),
-                                        .kind = std::move(kind),
-                                        .count = count,
-                                        .detail = std::move(detail)});
-  };
+// Events at a record's time: the session's clock and the log's wall clock there.
+struct RecordEvents {
+  store::Store& store;
+  std::int64_t session;
+  const tlog::Log& log;
+  const std::vector<std::int64_t>& mono_ns;
+
+  void operator()(std::optional<std::int64_t> on, std::size_t record, std::string kind, std::int64_t count,
+                  std::string detail) const {
+    store.append_event(session, {.link_id = on,
+                                 .mono_ns = mono_ns[record],
+                                 .wall_ns = ns(log.records[record].time_us),
+                                 .kind = std::move(kind),
+                                 .count = count,
+                                 .detail = std::move(detail)});
+  }
+};
+
+// The firmware's texts, then the log's own holes and its clock going back.
+void record_log_events(const RecordEvents& event, std::int64_t link, const Survey& s, TlogImportResult& result) {
   for (const StatusText& t : s.strings) {
     event(std::nullopt, t.record, "log", 1, severity_name(t.severity) + ": " + t.text);
     ++result.log_events;
   }
+  const tlog::Log& log = event.log;
   for (std::size_t i = 1; i < log.records.size(); ++i) {
     const std::uint64_t before = log.records[i - 1].time_us, now = log.records[i].time_us;
     if (now > before + kTlogGapUs) {
@@ -389,7 +394,12 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
       ++result.time_back;
     }
   }
-  const std::size_t last = log.records.size() - 1;
+}
+
+// What the import left out or found clipped, at the last record; each damaged stretch where it lies.
+void record_import_events(const RecordEvents& event, std::int64_t link, const std::string& file,
+                          const TlogImportResult& result) {
+  const std::size_t last = event.log.records.size() - 1;
   for (const auto& [reason, count] : result.skipped) {
     event(link, last, "import_skipped", static_cast<std::int64_t>(count),
           file + ": " + std::to_string(count) + " IMU messages: " + reason);
@@ -403,16 +413,54 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
           file + ": " + std::to_string(result.clipped) +
               " samples with a value at the end of its field's range (clipped by the sender?)");
   }
-  for (const tlog::Damage& d : log.damage) {
+  for (const tlog::Damage& d : event.log.damage) {
     event(std::nullopt, d.record == 0 ? 0 : d.record - 1, "import_damaged", static_cast<std::int64_t>(d.bytes),
           file + ": " + std::to_string(d.bytes) + " bytes at byte " + std::to_string(d.offset) + " are no record (" +
               d.what + "); the records around them are imported");
   }
-  result.gaps = find_gaps(samples.t_ns, options.gap_threshold_s, mono_ns.front());
-  append_gap_events(store, result.session, link, result.gaps);
-  result.axes = estimator::resolve_axes(declared_axes, estimator::detect_up(samples.t, samples.accel, samples.gyro));
-  if (result.axes.mismatch) event(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
-  pipeline::end_recorded_session(store, result.session, std::max(end_wall, ns(result.first_us)));
+}
+
+}  // namespace
+
+TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& options) {
+  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  const protocol::Calibration calibration = checked_calibration(options);
+  const bool raw_calibrated = options.accel_lsb.has_value();
+  const tlog::Log log = tlog::read_file(options.file);
+  const std::string file = options.file.string();
+
+  TlogImportResult result;
+  const std::vector<std::int64_t> mono_ns = session_clock(log);
+  const Survey s = survey(log);
+  const std::optional<mavlink::ImuSource> imu = choose_imu(s, options, raw_calibrated);
+  if (!imu) throw std::invalid_argument(no_imu_message(file, log, s, options, raw_calibrated));
+  count_imus(s, *imu, raw_calibrated, result);
+  // The reference rows are built as the frames are recorded, by the recorder (as on a live link).
+  std::optional<pipeline::MavlinkReference::Choice> reference;
+  if (options.reference) reference = reference_choice(s, Component{imu->sysid, imu->compid});
+  if (reference) result.reference_source = pipeline::MavlinkReference(*reference).source();
+  describe_log(log, result);
+
+  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+      store,
+      {.kind = "import",
+       .source = "MAVLink telemetry log " + file,
+       .config = metadata(log, s, options, *imu, result.reference_source),
+       .started_wall_ns = ns(result.first_us)},
+      {{.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
+        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source,
+        .mavlink_reference = reference}});
+  result.session = recorded.id;
+  const std::int64_t link = recorded.store_links[0];
+  const ImportedSamples samples = record_frames(store, log, mono_ns, recorded, options, result);
+
+  const RecordEvents event{.store = store, .session = result.session, .log = log, .mono_ns = mono_ns};
+  record_log_events(event, link, s, result);
+  record_import_events(event, link, file, result);
+  result.gaps = samples.record_gaps(store, result.session, link, options.gap_threshold_s, mono_ns.front());
+  result.axes = samples.resolve_axes(declared_axes);
+  if (result.axes.mismatch) event(link, log.records.size() - 1, "imu_axes_mismatch", 1, *result.axes.mismatch);
+  pipeline::end_recorded_session(store, result.session, std::max(ns(log.records.back().time_us), ns(result.first_us)));
   return result;
 }
 
