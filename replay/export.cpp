@@ -361,59 +361,45 @@ class McapChannels {
   std::map<std::string, std::uint16_t> schemas_, channels_;
 };
 
-}  // namespace
+// An MCAP export under way: the session's clock and links, the writer and its channels, the messages counted.
+class McapExport {
+ public:
+  McapExport(const store::Store& store, std::int64_t session, std::ostream& out)
+      : store_(store),
+        session_(session),
+        clock_(store, session, ""),
+        links_(links_by_id(store, session)),
+        writer_(out, "imubridge " IMUBRIDGE_VERSION) {}
 
-McapCounts export_mcap(const store::Store& store, std::int64_t session, std::optional<std::int64_t> run,
-                       std::ostream& out) {
-  find_session(store, session);
-  const std::optional<std::int64_t> chosen = estimates_run(store, session, run, false);
-  const SessionClock clock(store, session, "");
-  // Samples and estimates are timed by the IMU's clock: on the monotonic line through their link's first sample.
-  const auto device_log_time = [&](std::int64_t session_ns) { return log_time(clock.origin_mono_ns() + session_ns); };
-  std::map<std::int64_t, store::Link> links;
-  for (const auto& link : store.links(session)) links[link.id] = link;
-  const auto link_name = [&](std::int64_t id) {
-    const auto it = links.find(id);
-    return it != links.end() ? it->second.name : "link" + std::to_string(id);
-  };
-  const auto link_metadata = [&](std::int64_t id) {
-    std::map<std::string, std::string> metadata{{"link_id", std::to_string(id)}};
-    if (const auto it = links.find(id); it != links.end()) {
-      metadata["protocol"] = it->second.protocol;
-      metadata["device"] = it->second.device;
-    }
-    return metadata;
-  };
+  void samples() {
+    store_.for_each_sample(session_, std::nullopt, [&](const protocol::Sample& s) {
+      const std::int64_t t = clock_.device_ns(s.link_id, s.device_time_us);
+      nlohmann::ordered_json j{{"session_t_s", seconds(t)},
+                               {"link_id", s.link_id},
+                               {"seq", s.seq},
+                               {"device_time_us", s.device_time_us},
+                               {"recv_mono_ns", s.recv_mono_ns},
+                               {"ax", s.accel[0]},
+                               {"ay", s.accel[1]},
+                               {"az", s.accel[2]},
+                               {"gx", s.gyro[0]},
+                               {"gy", s.gyro[1]},
+                               {"gz", s.gyro[2]},
+                               {"mx", optional_number(s.has_mag, s.mag[0])},
+                               {"my", optional_number(s.has_mag, s.mag[1])},
+                               {"mz", optional_number(s.has_mag, s.mag[2])},
+                               {"temperature_c", optional_number(s.has_temperature, s.temperature_c)}};
+      const auto channel = channels_.get("/" + link_name(s.link_id) + "/imu", "imubridge.ImuSample", sample_schema(),
+                                         link_metadata(s.link_id));
+      writer_.write(channel, device_log_time(t), json_text(j));
+      ++counts_.samples;
+    });
+    writer_.close_chunk();
+  }
 
-  mcap::Writer writer(out, "imubridge " IMUBRIDGE_VERSION);
-  McapChannels channels(writer);
-  McapCounts counts;
-  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) {
-    const std::int64_t t = clock.device_ns(s.link_id, s.device_time_us);
-    nlohmann::ordered_json j{{"session_t_s", seconds(t)},
-                             {"link_id", s.link_id},
-                             {"seq", s.seq},
-                             {"device_time_us", s.device_time_us},
-                             {"recv_mono_ns", s.recv_mono_ns},
-                             {"ax", s.accel[0]},
-                             {"ay", s.accel[1]},
-                             {"az", s.accel[2]},
-                             {"gx", s.gyro[0]},
-                             {"gy", s.gyro[1]},
-                             {"gz", s.gyro[2]},
-                             {"mx", optional_number(s.has_mag, s.mag[0])},
-                             {"my", optional_number(s.has_mag, s.mag[1])},
-                             {"mz", optional_number(s.has_mag, s.mag[2])},
-                             {"temperature_c", optional_number(s.has_temperature, s.temperature_c)}};
-    const auto channel = channels.get("/" + link_name(s.link_id) + "/imu", "imubridge.ImuSample", sample_schema(),
-                                      link_metadata(s.link_id));
-    writer.write(channel, device_log_time(t), json_text(j));
-    ++counts.samples;
-  });
-  writer.close_chunk();
-  if (chosen) {
-    store.for_each_estimate(*chosen, [&](const store::Estimate& e) {
-      const std::int64_t t = clock.estimate_ns(e.link_id, e.t_s);
+  void estimates(std::int64_t run) {
+    store_.for_each_estimate(run, [&](const store::Estimate& e) {
+      const std::int64_t t = clock_.estimate_ns(e.link_id, e.t_s);
       nlohmann::ordered_json j{{"session_t_s", seconds(t)},
                                {"link_id", e.link_id},
                                {"seq", e.seq},
@@ -425,61 +411,115 @@ McapCounts export_mcap(const store::Store& store, std::int64_t session, std::opt
                                {"var_vx", e.var_vx},
                                {"var_vy", e.var_vy}};
       auto metadata = link_metadata(e.link_id);
-      metadata["run_id"] = std::to_string(*chosen);
-      const auto channel = channels.get("/" + link_name(e.link_id) + "/estimate", "imubridge.VelocityEstimate",
-                                        estimate_schema(), metadata);
-      writer.write(channel, device_log_time(t), json_text(j));
-      ++counts.estimates;
+      metadata["run_id"] = std::to_string(run);
+      const auto channel = channels_.get("/" + link_name(e.link_id) + "/estimate", "imubridge.VelocityEstimate",
+                                         estimate_schema(), metadata);
+      writer_.write(channel, device_log_time(t), json_text(j));
+      ++counts_.estimates;
     });
-    writer.close_chunk();
+    writer_.close_chunk();
   }
-  store.for_each_reference(session, [&](const store::ReferenceRow& r) {
-    const std::uint64_t time = log_time(r.t_ns);
-    const double session_t_s = seconds(clock.mono_ns(r.t_ns));
-    const auto& p = r.position;
-    const auto& q = r.quat_wxyz;
-    nlohmann::ordered_json pose{{"timestamp", time_json(time)},
-                                {"frame_id", "reference"},
-                                {"pose",
-                                 {{"position", {{"x", p[0]}, {"y", p[1]}, {"z", p[2]}}},
-                                  {"orientation", {{"x", q[1]}, {"y", q[2]}, {"z", q[3]}, {"w", q[0]}}}}},
-                                {"session_t_s", session_t_s}};
-    writer.write(channels.get("/reference/pose", "foxglove.PoseInFrame", pose_in_frame_schema()), time,
-                 json_text(pose));
-    if (r.velocity) {
-      const auto& v = *r.velocity;
-      nlohmann::ordered_json velocity{
-          {"session_t_s", session_t_s}, {"mono_ns", r.t_ns}, {"vx", v[0]}, {"vy", v[1]}, {"vz", v[2]}};
-      writer.write(channels.get("/reference/velocity", "imubridge.ReferenceVelocity", velocity_schema()), time,
-                   json_text(velocity));
+
+  void reference() {
+    store_.for_each_reference(session_, [&](const store::ReferenceRow& r) {
+      const std::uint64_t time = log_time(r.t_ns);
+      const double session_t_s = seconds(clock_.mono_ns(r.t_ns));
+      const auto& p = r.position;
+      const auto& q = r.quat_wxyz;
+      nlohmann::ordered_json pose{{"timestamp", time_json(time)},
+                                  {"frame_id", "reference"},
+                                  {"pose",
+                                   {{"position", {{"x", p[0]}, {"y", p[1]}, {"z", p[2]}}},
+                                    {"orientation", {{"x", q[1]}, {"y", q[2]}, {"z", q[3]}, {"w", q[0]}}}}},
+                                  {"session_t_s", session_t_s}};
+      writer_.write(channels_.get("/reference/pose", "foxglove.PoseInFrame", pose_in_frame_schema()), time,
+                    json_text(pose));
+      if (r.velocity) {
+        const auto& v = *r.velocity;
+        nlohmann::ordered_json velocity{
+            {"session_t_s", session_t_s}, {"mono_ns", r.t_ns}, {"vx", v[0]}, {"vy", v[1]}, {"vz", v[2]}};
+        writer_.write(channels_.get("/reference/velocity", "imubridge.ReferenceVelocity", velocity_schema()), time,
+                      json_text(velocity));
+      }
+      ++counts_.reference;
+    });
+    writer_.close_chunk();
+  }
+
+  void events() {
+    for (const store::Event& e : store_.events(session_)) {
+      const std::uint64_t time = log_time(e.mono_ns);
+      std::string message = e.kind;
+      if (e.count != 1) message += " (" + std::to_string(e.count) + " times)";
+      if (!e.detail.empty()) message += ": " + e.detail;
+      // foxglove.Log's fields, then the event's own, so nothing of it is lost.
+      nlohmann::ordered_json j{{"timestamp", time_json(time)},
+                               {"level", log_level(e.kind)},
+                               {"message", message},
+                               {"name", e.link_id ? link_name(*e.link_id) : "session"},
+                               {"file", ""},
+                               {"line", 0},
+                               {"session_t_s", seconds(clock_.mono_ns(e.mono_ns))},
+                               {"link_id", e.link_id ? nlohmann::ordered_json(*e.link_id) : nullptr},
+                               {"mono_ns", e.mono_ns},
+                               {"wall_ns", e.wall_ns},
+                               {"kind", e.kind},
+                               {"count", e.count},
+                               {"detail", e.detail}};
+      writer_.write(channels_.get("/events", "foxglove.Log", log_schema()), time, json_text(j));
+      ++counts_.events;
     }
-    ++counts.reference;
-  });
-  writer.close_chunk();
-  for (const store::Event& e : store.events(session)) {
-    const std::uint64_t time = log_time(e.mono_ns);
-    std::string message = e.kind;
-    if (e.count != 1) message += " (" + std::to_string(e.count) + " times)";
-    if (!e.detail.empty()) message += ": " + e.detail;
-    // foxglove.Log's fields, then the event's own, so nothing of it is lost.
-    nlohmann::ordered_json j{{"timestamp", time_json(time)},
-                             {"level", log_level(e.kind)},
-                             {"message", message},
-                             {"name", e.link_id ? link_name(*e.link_id) : "session"},
-                             {"file", ""},
-                             {"line", 0},
-                             {"session_t_s", seconds(clock.mono_ns(e.mono_ns))},
-                             {"link_id", e.link_id ? nlohmann::ordered_json(*e.link_id) : nullptr},
-                             {"mono_ns", e.mono_ns},
-                             {"wall_ns", e.wall_ns},
-                             {"kind", e.kind},
-                             {"count", e.count},
-                             {"detail", e.detail}};
-    writer.write(channels.get("/events", "foxglove.Log", log_schema()), time, json_text(j));
-    ++counts.events;
   }
-  writer.finish();
-  return counts;
+
+  McapCounts finish() {
+    writer_.finish();
+    return counts_;
+  }
+
+ private:
+  static std::map<std::int64_t, store::Link> links_by_id(const store::Store& store, std::int64_t session) {
+    std::map<std::int64_t, store::Link> links;
+    for (const auto& link : store.links(session)) links[link.id] = link;
+    return links;
+  }
+  // Samples and estimates are timed by the IMU's clock: on the monotonic line through their link's first sample.
+  std::uint64_t device_log_time(std::int64_t session_ns) const {
+    return log_time(clock_.origin_mono_ns() + session_ns);
+  }
+  std::string link_name(std::int64_t id) const {
+    const auto it = links_.find(id);
+    return it != links_.end() ? it->second.name : "link" + std::to_string(id);
+  }
+  std::map<std::string, std::string> link_metadata(std::int64_t id) const {
+    std::map<std::string, std::string> metadata{{"link_id", std::to_string(id)}};
+    if (const auto it = links_.find(id); it != links_.end()) {
+      metadata["protocol"] = it->second.protocol;
+      metadata["device"] = it->second.device;
+    }
+    return metadata;
+  }
+
+  const store::Store& store_;
+  std::int64_t session_;
+  const SessionClock clock_;
+  const std::map<std::int64_t, store::Link> links_;
+  mcap::Writer writer_;
+  McapChannels channels_{writer_};
+  McapCounts counts_;
+};
+
+}  // namespace
+
+McapCounts export_mcap(const store::Store& store, std::int64_t session, std::optional<std::int64_t> run,
+                       std::ostream& out) {
+  find_session(store, session);
+  const std::optional<std::int64_t> chosen = estimates_run(store, session, run, false);
+  McapExport mcap(store, session, out);
+  mcap.samples();
+  if (chosen) mcap.estimates(*chosen);
+  mcap.reference();
+  mcap.events();
+  return mcap.finish();
 }
 
 }  // namespace imubridge::replay
