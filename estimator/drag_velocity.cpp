@@ -105,25 +105,7 @@ bool DragVelocityEstimator::align(ImuSample& sample) {
 
 std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSample& sample) {
   ++counters_.samples_in;
-  if (!finite(sample)) {
-    ++counters_.rejected_non_finite;
-    return std::nullopt;
-  }
-  if (sample.accel.cwiseAbs().maxCoeff() > config_.max_specific_force ||
-      sample.gyro.cwiseAbs().maxCoeff() > config_.max_rate) {
-    ++counters_.rejected_out_of_range;
-    return std::nullopt;
-  }
-  if (last_input_t_ && !(sample.t > *last_input_t_)) {
-    ++counters_.rejected_time;
-    return std::nullopt;
-  }
-  if (last_input_t_ && sample.t - *last_input_t_ > config_.max_gap) {
-    ++counters_.gaps;
-    restart_window();
-  }
-  last_input_t_ = sample.t;
-
+  if (!accept(sample)) return std::nullopt;
   // The identified gyro bias goes first: everything downstream (alignment, differentiation, compensation,
   // propagation) wants the rate itself; the filter's bias states then track what is left.
   ImuSample input{sample.t, sample.gyro - params_.gyro_bias, sample.accel};
@@ -141,6 +123,41 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   const ImuSample& centre = history_[(head_ + delay_samples()) % window];
 
   const Eigen::Vector3d f_cm = compensator_.compensate(centre.accel, centre.gyro, *gyro_rate);
+  propagate_to(centre);
+
+  DragVelocityEstimate out;
+  out.t = centre.t;
+  out.f = f_cm.head<2>();
+  const WindLinearisation wind = linearise_wind();
+  for (int axis = 0; axis < 2; ++axis) fuse_axis(axis, wind, out);
+  out.gyro_bias = x_.tail<2>();
+  ++counters_.estimates_out;
+  return out;
+}
+
+bool DragVelocityEstimator::accept(const ImuSample& sample) {
+  if (!finite(sample)) {
+    ++counters_.rejected_non_finite;
+    return false;
+  }
+  if (sample.accel.cwiseAbs().maxCoeff() > config_.max_specific_force ||
+      sample.gyro.cwiseAbs().maxCoeff() > config_.max_rate) {
+    ++counters_.rejected_out_of_range;
+    return false;
+  }
+  if (last_input_t_ && !(sample.t > *last_input_t_)) {
+    ++counters_.rejected_time;
+    return false;
+  }
+  if (last_input_t_ && sample.t - *last_input_t_ > config_.max_gap) {
+    ++counters_.gaps;
+    restart_window();
+  }
+  last_input_t_ = sample.t;
+  return true;
+}
+
+void DragVelocityEstimator::propagate_to(const ImuSample& centre) {
   if (filter_t_) {
     const double dt = centre.t - *filter_t_;
     if (dt <= config_.max_gap) {
@@ -151,55 +168,55 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
     }
   }
   filter_t_ = centre.t;
+}
 
-  DragVelocityEstimate out;
-  out.t = centre.t;
-  out.f = f_cm.head<2>();
-  const double f_var = config_.accel_noise * config_.accel_noise;
-  // With wind the drag inverts to the air velocity; the state and the output stay the ground velocity. The wind's
-  // projection is linearised once, at the prediction, for both axes' updates.
-  Eigen::Vector2d wind = Eigen::Vector2d::Zero();
-  Eigen::Matrix2d wind_jacobian;
-  Eigen::Vector2d predicted_tilt = Eigen::Vector2d::Zero();
+DragVelocityEstimator::WindLinearisation DragVelocityEstimator::linearise_wind() const {
+  WindLinearisation w;
   if (windy_) {
-    wind = wind_in_body(&wind_jacobian);
-    predicted_tilt = x_.segment<2>(2);
+    w.wind = wind_in_body(&w.jacobian);
+    w.predicted_tilt = x_.segment<2>(2);
   }
-  for (int axis = 0; axis < 2; ++axis) {
-    out.f_var[axis] = f_var;
-    const double k = params_.drag_linear[axis];
-    const double mu = params_.drag_quadratic[axis];
-    // The first axis's update moved the tilt: carry the wind's projection along to first order.
-    const double wind_now = windy_ ? wind[axis] + wind_jacobian.row(axis).dot(x_.segment<2>(2) - predicted_tilt) : 0.0;
-    out.prior_air_velocity[axis] = x_[axis] - wind_now;
-    out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
-    const double prior_slope = drag_slope(k, mu, out.prior_air_velocity[axis]);
-    out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
-    if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
-      out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
-      continue;
-    }
-    const double v_raw = invert_drag(k, mu, out.f[axis]);
-    const double slope = drag_slope(k, mu, v_raw);
-    out.v_raw[axis] = v_raw;
-    out.v_raw_var[axis] = f_var / (slope * slope);
-    if (windy_) {
-      out.v_raw[axis] = v_raw + wind[axis];
-      fuse_air_velocity(axis, v_raw, wind_now, wind_jacobian.row(axis).transpose());
-    } else {
-      fuse_velocity(axis, v_raw);
-    }
-    // The filter's velocity carries, beside its own variance, the offset's: offset / slope, constant through the
-    // flight. Weighed against rest (a Gaussian prior of std rest_speed_std), the product of the two is the output.
-    const double offset = config_.accel_offset_std / std::max(drag_slope(k, mu, x_[axis]), 1e-9);
-    const double known = p_(axis, axis) + offset * offset + config_.wind_std * config_.wind_std;
-    const double rest = config_.rest_speed_std * config_.rest_speed_std;
-    out.v[axis] = x_[axis] * rest / (rest + known);
-    out.v_var[axis] = known * rest / (rest + known);
+  return w;
+}
+
+void DragVelocityEstimator::fuse_axis(int axis, const WindLinearisation& w, DragVelocityEstimate& out) {
+  const double f_var = config_.accel_noise * config_.accel_noise;
+  out.f_var[axis] = f_var;
+  const double k = params_.drag_linear[axis];
+  const double mu = params_.drag_quadratic[axis];
+  // The first axis's update moved the tilt: carry the wind's projection along to first order.
+  const double wind_now = windy_ ? w.wind[axis] + w.jacobian.row(axis).dot(x_.segment<2>(2) - w.predicted_tilt) : 0.0;
+  out.prior_air_velocity[axis] = x_[axis] - wind_now;
+  out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
+  const double prior_slope = drag_slope(k, mu, out.prior_air_velocity[axis]);
+  out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
+  if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
+    out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
+    return;
   }
-  out.gyro_bias = x_.tail<2>();
-  ++counters_.estimates_out;
-  return out;
+  const double v_raw = invert_drag(k, mu, out.f[axis]);
+  const double slope = drag_slope(k, mu, v_raw);
+  out.v_raw[axis] = v_raw;
+  out.v_raw_var[axis] = f_var / (slope * slope);
+  if (windy_) {
+    out.v_raw[axis] = v_raw + w.wind[axis];
+    fuse_air_velocity(axis, v_raw, wind_now, w.jacobian.row(axis).transpose());
+  } else {
+    fuse_velocity(axis, v_raw);
+  }
+  weigh_against_rest(axis, out);
+}
+
+void DragVelocityEstimator::weigh_against_rest(int axis, DragVelocityEstimate& out) const {
+  const double k = params_.drag_linear[axis];
+  const double mu = params_.drag_quadratic[axis];
+  // The filter's velocity carries, beside its own variance, the offset's: offset / slope, constant through the
+  // flight. Weighed against rest (a Gaussian prior of std rest_speed_std), the product of the two is the output.
+  const double offset = config_.accel_offset_std / std::max(drag_slope(k, mu, x_[axis]), 1e-9);
+  const double known = p_(axis, axis) + offset * offset + config_.wind_std * config_.wind_std;
+  const double rest = config_.rest_speed_std * config_.rest_speed_std;
+  out.v[axis] = x_[axis] * rest / (rest + known);
+  out.v_var[axis] = known * rest / (rest + known);
 }
 
 void DragVelocityEstimator::restart_window() {

@@ -126,6 +126,24 @@ class DragVelocityEstimator {
     Eigen::Vector3d value = Eigen::Vector3d::Zero();
   };
 
+  // The wind's projection into the body, linearised once at the prediction for both axes' updates.
+  struct WindLinearisation {
+    Eigen::Vector2d wind = Eigen::Vector2d::Zero();
+    Eigen::Matrix2d jacobian = Eigen::Matrix2d::Zero();        // of `wind` by (gamma_x, gamma_y)
+    Eigen::Vector2d predicted_tilt = Eigen::Vector2d::Zero();  // the tilt it was linearised at
+  };
+
+  // Counts a sample that is not finite, out of range or not after the last as rejected (false); restarts the window
+  // after a gap.
+  bool accept(const ImuSample& sample);
+  // Predicts the state to the window centre's time, or across a gap grows its uncertainty alone.
+  void propagate_to(const ImuSample& centre);
+  // With wind the drag inverts to the air velocity; the state and the output stay the ground velocity. Zero without.
+  WindLinearisation linearise_wind() const;
+  // One horizontal axis's prediction, drag measurement and output into `out` (whose f is set).
+  void fuse_axis(int axis, const WindLinearisation& wind, DragVelocityEstimate& out);
+  // The output velocity and variance: the filter's, with the offset's share, weighed against rest.
+  void weigh_against_rest(int axis, DragVelocityEstimate& out) const;
   // Pairs the accelerometer with the gyro of time_offset earlier: delays the gyro (time_offset > 0) or the
   // accelerometer (< 0) through a ring. False while the ring does not reach back far enough.
   bool align(ImuSample& sample);
