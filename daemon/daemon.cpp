@@ -137,70 +137,89 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       resume_timer_(io_) {
   signals_.add(SIGUSR1);
   if (!params_note_.empty()) spdlog::info("{}", params_note_);
-  // Each link's declared IMU axes, and an XBee radio takes the axes of the link it is heard through: while not
-  // recording its id says which (pipeline::is_unrecorded_radio_id); while recording it is a store link named after
-  // that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.
-  // Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
   pipeline::StageAxes axes;
-  axes.declared = [this](protocol::LinkId id) {
-    const auto axes_of = [](const Link& link) {
-      return estimator::parse_imu_axes(link.config.axes);  // checked when the config was read
-    };
-    if (pipeline::is_unrecorded_radio_id(id)) return axes_of(*links_.at(pipeline::unrecorded_radio_link_index(id)));
-    for (const auto& link : links_) {
-      if (link->store_link == id) return axes_of(*link);
-    }
-    if (recording_) {
-      for (const store::Link& stored : recording_->store.links(recording_->session)) {
-        if (stored.id != id) continue;
-        if (const auto radio = pipeline::parse_radio_link_name(stored.name)) {
-          for (const auto& link : links_) {
-            if (link->config.name == radio->link) return axes_of(*link);
-          }
-        }
-      }
-    }
-    return estimator::auto_axes();
-  };
+  axes.declared = [this](protocol::LinkId id) { return declared_axes(id); };
   axes.on_resolved = [this](protocol::LinkId id, const estimator::AxesResolution& resolution) {
-    spdlog::info("link {}: {}", id, resolution.description);
-    if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
-    if (!resolution.mismatch) return;
-    spdlog::warn("link {}: {}", id, *resolution.mismatch);
-    const std::int64_t link =
-        pipeline::is_unrecorded_radio_id(id) ? links_[pipeline::unrecorded_radio_link_index(id)]->store_link : id;
-    record([&](Recording& r) {
-      r.store.append_event(r.session, {.link_id = link,
-                                       .mono_ns = mono_now_ns(),
-                                       .wall_ns = wall_now_ns(),
-                                       .kind = "imu_axes_mismatch",
-                                       .detail = *resolution.mismatch});
-    });
+    on_axes_resolved(id, resolution);
   };
   // Bad parameters fail here, before any I/O.
   engine_ =
       std::make_unique<pipeline::SessionEngine>(std::make_unique<pipeline::EstimationStage>(params_, std::move(axes)));
   outputs_ = std::make_unique<Outputs>(io_, config_.outputs);
-  for (const LinkConfig& link_config : config_.links) {
-    auto link = std::make_unique<Link>();
-    Link& l = *link;
-    l.index = links_.size();
-    l.config = link_config;
-    l.decoding = std::make_unique<LinkDecoding>(*this, l);
-    l.store_link = static_cast<std::int64_t>(links_.size()) + 1;  // distinct until a recording assigns its own
-    l.port = std::make_unique<SerialLink>(
-        io_, link_config,
-        SerialLink::Handlers{
-            .on_data = [this, &l](std::span<const std::uint8_t> bytes) { on_data(l, bytes); },
-            .on_open = [this, &l](const std::string& path, bool reopened) { on_open(l, path, reopened); },
-            .on_lost = [this, &l](const std::string& reason) { on_lost(l, reason); }});
-    if (!link_config.bridge.empty()) {
-      l.bridge = std::make_unique<LinkBridge>(
-          io_, link_config.bridge, [this, &l](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); });
-    }
-    if (link_config.feedback.enabled) l.feedback.emplace(link_config.format, link_config.feedback);
-    links_.push_back(std::move(link));
+  for (const LinkConfig& link_config : config_.links) add_link(link_config);
+  add_sinks();
+  if (auto problem = storage_problem()) {
+    spdlog::error("not recording: {}", *problem);
+    not_recording_ = NotRecording{.path = config_.store.path, .previous = "", .reason = *problem};
+    use_decoders();
+  } else {
+    open_recording(config_.store.path, "");  // a store that cannot be opened at start is fatal
   }
+}
+
+// Each link's declared IMU axes, and an XBee radio takes the axes of the link it is heard through: while not
+// recording its id says which (pipeline::is_unrecorded_radio_id); while recording it is a store link named after
+// that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.
+estimator::ImuAxes Daemon::declared_axes(protocol::LinkId id) const {
+  const auto axes_of = [](const Link& link) {
+    return estimator::parse_imu_axes(link.config.axes);  // checked when the config was read
+  };
+  if (pipeline::is_unrecorded_radio_id(id)) return axes_of(*links_.at(pipeline::unrecorded_radio_link_index(id)));
+  for (const auto& link : links_) {
+    if (link->store_link == id) return axes_of(*link);
+  }
+  if (recording_) {
+    for (const store::Link& stored : recording_->store.links(recording_->session)) {
+      if (stored.id != id) continue;
+      if (const auto radio = pipeline::parse_radio_link_name(stored.name)) {
+        for (const auto& link : links_) {
+          if (link->config.name == radio->link) return axes_of(*link);
+        }
+      }
+    }
+  }
+  return estimator::auto_axes();
+}
+
+// Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
+void Daemon::on_axes_resolved(protocol::LinkId id, const estimator::AxesResolution& resolution) {
+  spdlog::info("link {}: {}", id, resolution.description);
+  if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
+  if (!resolution.mismatch) return;
+  spdlog::warn("link {}: {}", id, *resolution.mismatch);
+  const std::int64_t link =
+      pipeline::is_unrecorded_radio_id(id) ? links_[pipeline::unrecorded_radio_link_index(id)]->store_link : id;
+  record([&](Recording& r) {
+    r.store.append_event(r.session, {.link_id = link,
+                                     .mono_ns = mono_now_ns(),
+                                     .wall_ns = wall_now_ns(),
+                                     .kind = "imu_axes_mismatch",
+                                     .detail = *resolution.mismatch});
+  });
+}
+
+void Daemon::add_link(const LinkConfig& link_config) {
+  auto link = std::make_unique<Link>();
+  Link& l = *link;
+  l.index = links_.size();
+  l.config = link_config;
+  l.decoding = std::make_unique<LinkDecoding>(*this, l);
+  l.store_link = static_cast<std::int64_t>(links_.size()) + 1;  // distinct until a recording assigns its own
+  l.port = std::make_unique<SerialLink>(
+      io_, link_config,
+      SerialLink::Handlers{
+          .on_data = [this, &l](std::span<const std::uint8_t> bytes) { on_data(l, bytes); },
+          .on_open = [this, &l](const std::string& path, bool reopened) { on_open(l, path, reopened); },
+          .on_lost = [this, &l](const std::string& reason) { on_lost(l, reason); }});
+  if (!link_config.bridge.empty()) {
+    l.bridge = std::make_unique<LinkBridge>(
+        io_, link_config.bridge, [this, &l](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); });
+  }
+  if (link_config.feedback.enabled) l.feedback.emplace(link_config.format, link_config.feedback);
+  links_.push_back(std::move(link));
+}
+
+void Daemon::add_sinks() {
   sinks_.push_back(std::make_unique<RecordingSink>(*this));
   std::vector<LiveLink> live;
   for (auto& link : links_) {
@@ -227,13 +246,6 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
       }};
   for (auto& sink : make_live_sinks(context, live)) sinks_.push_back(std::move(sink));
   for (auto& sink : sinks_) engine_->add_sink(*sink);
-  if (auto problem = storage_problem()) {
-    spdlog::error("not recording: {}", *problem);
-    not_recording_ = NotRecording{.path = config_.store.path, .previous = "", .reason = *problem};
-    use_decoders();
-  } else {
-    open_recording(config_.store.path, "");  // a store that cannot be opened at start is fatal
-  }
 }
 
 Daemon::~Daemon() = default;

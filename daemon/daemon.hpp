@@ -15,6 +15,7 @@
 #include "daemon/asio.hpp"
 #include "daemon/config.hpp"
 #include "daemon/systemd_notify.hpp"
+#include "estimator/imu_axes.hpp"
 #include "estimator/params.hpp"
 #include "protocol/sample.hpp"
 #include "store/records.hpp"
@@ -80,6 +81,13 @@ class Daemon {
   // Runs a store write; a failure ends the recording, never the daemon.
   template <typename Write>
   void record(Write&& write);
+
+  // Construction's steps: each link's declared axes and what is done once they are resolved, for the engine's
+  // stage; a link's port, bridge and feedback; the engine's sinks, the daemon's own first.
+  estimator::ImuAxes declared_axes(protocol::LinkId id) const;
+  void on_axes_resolved(protocol::LinkId id, const estimator::AxesResolution& resolution);
+  void add_link(const LinkConfig& link_config);
+  void add_sinks();
 
   void on_open(Link& link, const std::string& path, bool reopened);
   void request_streams(Link& link);
