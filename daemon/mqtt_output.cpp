@@ -69,6 +69,25 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
       outputs_(context.outputs),
       record_event_(context.record_event),
       report_timer_(context.io) {
+  name_topics();
+  const auto password = read_mqtt_password(config_);
+  create_client(password);
+  set_callbacks();
+  start_connecting();
+  network_ = std::thread([this] { network_loop(); });
+  publisher_ = std::thread([this] { publish_loop(); });
+  outputs_.add_counters("mqtt", [this] { return counters(); });
+  schedule_report();
+  spdlog::info("mqtt: publishing to {} as station '{}' (samples {}, estimates {}, QoS {})", config_.url,
+               config_.station,
+               config_.sample_hz <= 0 ? std::string("off") : fmt::format("at most {} Hz per link", config_.sample_hz),
+               !config_.estimate_hz        ? std::string("all")
+               : *config_.estimate_hz <= 0 ? std::string("off")
+                                           : fmt::format("at most {} Hz per link", *config_.estimate_hz),
+               config_.qos);
+}
+
+void MqttSink::name_topics() {
   const std::vector<std::string>& link_names = feed_.link_names();
   dropped_unreported_.assign(link_names.size(), 0);
   drops_to_publish_.assign(link_names.size(), 0);
@@ -84,8 +103,9 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
                                    {"software_version", IMUBRIDGE_VERSION},
                                    {"pid", static_cast<std::int64_t>(::getpid())}}
                         .dump();
-  const auto password = read_mqtt_password(config_);
+}
 
+void MqttSink::create_client(const std::optional<std::string>& password) {
   static std::once_flag library;
   std::call_once(library, [] { mosquitto_lib_init(); });
   client_ = mosquitto_new(config_.client_id.c_str(), /*clean_session=*/true, this);
@@ -117,6 +137,9 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
     mosquitto_destroy(client_);
     throw;
   }
+}
+
+void MqttSink::set_callbacks() {
   mosquitto_connect_callback_set(client_,
                                  [](mosquitto*, void* self, int rc) { static_cast<MqttSink*>(self)->on_connect(rc); });
   mosquitto_disconnect_callback_set(
@@ -129,7 +152,9 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
   });
   // Another thread runs the connection (network_loop): mosquitto_publish only queues, and wakes it.
   mosquitto_threaded_set(client_, true);
+}
 
+void MqttSink::start_connecting() {
   // A broker that is down now is no error: network_loop keeps trying, with backoff.
   const int rc =
       mosquitto_connect_async(client_, config_.host.c_str(), config_.port, static_cast<int>(config_.keepalive.count()));
@@ -141,17 +166,6 @@ MqttSink::MqttSink(const MqttConfig& config, const std::vector<LiveLink>& links,
     spdlog::warn("mqtt: cannot reach {} yet ({}); trying again in the background", config_.url,
                  rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc));
   }
-  network_ = std::thread([this] { network_loop(); });
-  publisher_ = std::thread([this] { publish_loop(); });
-  outputs_.add_counters("mqtt", [this] { return counters(); });
-  schedule_report();
-  spdlog::info("mqtt: publishing to {} as station '{}' (samples {}, estimates {}, QoS {})", config_.url,
-               config_.station,
-               config_.sample_hz <= 0 ? std::string("off") : fmt::format("at most {} Hz per link", config_.sample_hz),
-               !config_.estimate_hz        ? std::string("all")
-               : *config_.estimate_hz <= 0 ? std::string("off")
-                                           : fmt::format("at most {} Hz per link", *config_.estimate_hz),
-               config_.qos);
 }
 
 MqttSink::~MqttSink() {

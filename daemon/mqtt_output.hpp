@@ -63,6 +63,12 @@ class MqttSink final : public pipeline::SessionSink {
     std::string payload;
   };
 
+  // Construction's steps: the topics and status payloads, by link; the libmosquitto client and its options (it is
+  // destroyed again when one fails); its callbacks; the first connection attempt.
+  void name_topics();
+  void create_client(const std::optional<std::string>& password);
+  void set_callbacks();
+  void start_connecting();
   void publish_event(std::size_t link, const std::string& kind, std::int64_t count, const std::string& detail,
                      std::optional<std::int64_t> device_time_us, std::int64_t wall_ns, bool evicts = true);
   // Appends to the outbox, dropping the oldest beyond its bound. A report of drops (`evicts` false) goes in over
