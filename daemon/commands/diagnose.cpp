@@ -228,7 +228,8 @@ void print_summary(const dg::Diagnosis& d) {
     std::printf("  unexplained (%s, axis %s): %s\n", u.kind.c_str(), u.axis.c_str(), u.where.c_str());
 }
 
-int run(const DiagnoseCliOptions& o) {
+// The search's options from the command line, checked.
+dg::DiagnoseOptions search_options(const DiagnoseCliOptions& o) {
   dg::DiagnoseOptions options;
   options.model = parse_model(o.model);
   options.axes = parse_axes(o.axis);
@@ -240,15 +241,21 @@ int run(const DiagnoseCliOptions& o) {
   options.judge_by_flight = o.judge_by_flight;
   if (o.lowpass_hz < 0.0) throw std::invalid_argument("--lowpass must be a positive frequency in Hz (0: off)");
   options.lowpass_hz = o.lowpass_hz;
-  const std::vector<std::int64_t> fit_ids = parse_session_list(o.sessions);
-  std::vector<std::int64_t> validate_ids;
-  if (o.validate_sessions) validate_ids = parse_session_list(*o.validate_sessions);
-  const bool several = fit_ids.size() > 1 || !validate_ids.empty();
-  if (several && options.velocity == dg::VelocitySource::eq12)
-    throw std::invalid_argument(
-        "--velocity imu takes one session: its open-loop integral would run from one flight into the next");
+  return options;
+}
 
-  const store::Store store(o.db, {.read_only = true});
+// What is diagnosed: one session, or several flights joined (daemon/commands/flight_set_reading.hpp).
+struct DiagnosedData {
+  std::optional<pipeline::SessionSeries> session;
+  std::optional<FlightSetReading> flights;
+  std::optional<JoinedFlights> joined;
+};
+
+// Reads the sessions, and completes `options` by them: the velocity source when none was given, the windows, the
+// name of what is diagnosed.
+DiagnosedData read_data(const store::Store& store, const DiagnoseCliOptions& o,
+                        const std::vector<std::int64_t>& fit_ids, const std::vector<std::int64_t>& validate_ids,
+                        bool several, dg::DiagnoseOptions& options) {
   // The reference when the session has one, unless told otherwise. The filter's fit never reads it; a reference
   // read beside it only scores the velocity in the report.
   using pipeline::ReferenceUse;
@@ -258,43 +265,42 @@ int run(const DiagnoseCliOptions& o) {
                                                                                       : ReferenceUse::none;
   pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
-  // One session, or several flights joined (daemon/commands/flight_set_reading.hpp).
-  std::optional<pipeline::SessionSeries> session;
-  std::optional<FlightSetReading> flights;
-  std::optional<JoinedFlights> joined;
+  DiagnosedData data;
   if (several) {
-    flights = read_flight_set(store, fit_ids, validate_ids, reading, o.windows);
+    data.flights = read_flight_set(store, fit_ids, validate_ids, reading, o.windows);
     if (!options.velocity)
-      options.velocity = flights->every_reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
-    joined = join(*flights, *options.velocity == dg::VelocitySource::filter);
-    options.train = joined->train;
-    options.validate = joined->validate;
+      options.velocity = data.flights->every_reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
+    data.joined = join(*data.flights, *options.velocity == dg::VelocitySource::filter);
+    options.train = data.joined->train;
+    options.validate = data.joined->validate;
     options.session = o.db + "#" + o.sessions + (o.validate_sessions ? "/" + *o.validate_sessions : "");
   } else {
-    session = pipeline::read_session_series(store, fit_ids.front(), reading);
+    data.session = pipeline::read_session_series(store, fit_ids.front(), reading);
     if (!options.velocity)
-      options.velocity = session->series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
-    std::tie(options.train, options.validate) = o.windows.resolve(*session);
+      options.velocity = data.session->series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
+    std::tie(options.train, options.validate) = o.windows.resolve(*data.session);
     options.session = o.db + "#" + std::to_string(fit_ids.front());
   }
-  // Progress on a terminal only: a log file or a pipe gets the summary alone.
-  const bool show_progress = isatty(STDERR_FILENO) == 1;
-  if (show_progress)
-    options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
-  dg::Diagnosis diagnosis = dg::run_diagnosis(several ? joined->set.series : session->series, options);
-  if (show_progress) TerminalProgress::clear();
-  if (several) {
+  return data;
+}
+
+// What the reading knew into the diagnosis, and said before the summary.
+void add_reading(const DiagnosedData& data, dg::Diagnosis& diagnosis) {
+  if (data.flights) {
     // Conditions fitted over several flights are no one flight's: named by the set, they fly on none.
-    diagnosis.final_params.conditions_flight = flights->identity;
-    measure_transfer(*flights, diagnosis.final_params, stdout);
+    diagnosis.final_params.conditions_flight = data.flights->identity;
+    measure_transfer(*data.flights, diagnosis.final_params, stdout);
   } else {
-    diagnosis.imu_axes = session->axes.description;
-    diagnosis.warnings.insert(diagnosis.warnings.begin(), session->warnings.begin(), session->warnings.end());
-    diagnosis.final_params.identification.reference_delay = recorded_reference_delay(*session);
-    print_reference_delay(*session);  // with the summary: an error before it stays one line
+    const pipeline::SessionSeries& session = *data.session;
+    diagnosis.imu_axes = session.axes.description;
+    diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
+    diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
+    print_reference_delay(session);  // with the summary: an error before it stays one line
   }
-  print_summary(diagnosis);
-  if (several) print_flight_map(stdout, *flights, *joined);
+}
+
+// --report's files and --out's model.
+void write_outputs(const DiagnoseCliOptions& o, const dg::Diagnosis& diagnosis) {
   if (o.report) {
     const std::filesystem::path dir(*o.report);
     std::filesystem::create_directories(dir);
@@ -312,6 +318,30 @@ int run(const DiagnoseCliOptions& o) {
       std::printf("warning: wrote %s, but the live estimator refuses it: %s\n", o.out->c_str(), e.what());
     }
   }
+}
+
+int run(const DiagnoseCliOptions& o) {
+  dg::DiagnoseOptions options = search_options(o);
+  const std::vector<std::int64_t> fit_ids = parse_session_list(o.sessions);
+  std::vector<std::int64_t> validate_ids;
+  if (o.validate_sessions) validate_ids = parse_session_list(*o.validate_sessions);
+  const bool several = fit_ids.size() > 1 || !validate_ids.empty();
+  if (several && options.velocity == dg::VelocitySource::eq12)
+    throw std::invalid_argument(
+        "--velocity imu takes one session: its open-loop integral would run from one flight into the next");
+
+  const store::Store store(o.db, {.read_only = true});
+  const DiagnosedData data = read_data(store, o, fit_ids, validate_ids, several, options);
+  // Progress on a terminal only: a log file or a pipe gets the summary alone.
+  const bool show_progress = isatty(STDERR_FILENO) == 1;
+  if (show_progress)
+    options.progress = [progress = std::make_shared<TerminalProgress>()](const auto& p) { (*progress)(p); };
+  dg::Diagnosis diagnosis = dg::run_diagnosis(several ? data.joined->set.series : data.session->series, options);
+  if (show_progress) TerminalProgress::clear();
+  add_reading(data, diagnosis);
+  print_summary(diagnosis);
+  if (several) print_flight_map(stdout, *data.flights, *data.joined);
+  write_outputs(o, diagnosis);
   return 0;
 }
 
