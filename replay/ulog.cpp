@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cstring>
 #include <set>
+#include <utility>
 
 #include "replay/file_bytes.hpp"
 
@@ -255,55 +256,12 @@ class Reader {
   }
 
   bool message(char type, std::span<const std::uint8_t> body, std::size_t pos, bool appended) {
-    const auto text = [&](std::size_t from) {
-      return std::string_view(reinterpret_cast<const char*>(body.data()) + from, body.size() - from);
-    };
     switch (type) {
-      case 'F': {
-        Format format = parse_format(text(0));
-        const std::string name = format.name;
-        log_.formats[name] = std::move(format);
-        resolved_.clear();
-        return true;
-      }
+      case 'F': return format_message(body);
       case 'I':
-      case 'P': {
-        if (body.size() < 1 || body.size() < 1u + body[0]) return malformed(type, pos);
-        const auto key = split_key(text(1).substr(0, body[0]));
-        if (!key) return malformed(type, pos);
-        nlohmann::json value = decode_value(key->first, body.subspan(1 + body[0]));
-        const std::string name = clean_text(key->second);
-        if (type == 'I') {
-          log_.info[name] = std::move(value);
-        } else if (in_data_) {
-          log_.param_changes.push_back({last_timestamp_, name, std::move(value)});
-        } else {
-          log_.params[name] = std::move(value);
-        }
-        return true;
-      }
+      case 'P': return info_or_parameter(type, body, pos);
       case 'M':
-      case 'Q': {
-        if (body.size() < 2 || body.size() < 2u + body[1]) return malformed(type, pos);
-        const auto key = split_key(text(2).substr(0, body[1]));
-        if (!key) return malformed(type, pos);
-        nlohmann::json value = decode_value(key->first, body.subspan(2 + body[1]));
-        const std::string name = clean_text(key->second);
-        if (type == 'Q') {
-          log_.default_params[name] = {
-              {"value", std::move(value)}, {"system", (body[0] & 1) != 0}, {"airframe", (body[0] & 2) != 0}};
-          return true;
-        }
-        auto& values = log_.multi_info[name];
-        if (!values.is_array()) values = nlohmann::json::array();
-        // A continued value is the rest of the previous one (long strings are split over messages).
-        if (body[0] != 0 && !values.empty() && values.back().is_string() && value.is_string()) {
-          values.back() = values.back().get<std::string>() + value.get<std::string>();
-        } else {
-          values.push_back(std::move(value));
-        }
-        return true;
-      }
+      case 'Q': return multi_info_or_default(type, body, pos);
       case 'A': return add_subscription(body, pos);
       case 'R': {
         if (body.size() < 2) return malformed(type, pos);
@@ -312,16 +270,7 @@ class Reader {
       }
       case 'D': return data(body, appended);
       case 'L':
-      case 'C': {
-        const std::size_t header = type == 'L' ? 9 : 11;
-        if (body.size() < header) return malformed(type, pos);
-        LoggedString s{.level = body[0]};
-        if (type == 'C') s.tag = load<std::uint16_t>(body.data() + 1);
-        s.timestamp_us = load<std::uint64_t>(body.data() + header - 8);
-        s.text = clean_text(text(header));
-        log_.strings.push_back(std::move(s));
-        return true;
-      }
+      case 'C': return logged_string(type, body, pos);
       case 'S': {
         if (body.size() < 8 || !std::equal(kSyncMagic.begin(), kSyncMagic.end(), body.begin())) {
           return malformed(type, pos);
@@ -337,6 +286,75 @@ class Reader {
       case 'B': skip("flag bits message not first"); return true;
       default: skip("unknown message type"); return true;  // the format allows new types: readers skip them
     }
+  }
+
+  // 'F': a format definition.
+  bool format_message(std::span<const std::uint8_t> body) {
+    Format format = parse_format(text_of(body));
+    const std::string name = format.name;
+    log_.formats[name] = std::move(format);
+    resolved_.clear();
+    return true;
+  }
+
+  // The name and value of an 'I', 'P', 'M' or 'Q' message: its key ("type name") is as long as body[length_at] says
+  // and follows it, the value fills the rest. Nothing when the body is too short or the key malformed.
+  static std::optional<std::pair<std::string, nlohmann::json>> read_key_value(std::span<const std::uint8_t> body,
+                                                                              std::size_t length_at) {
+    const std::size_t from = length_at + 1;
+    if (body.size() < from || body.size() < from + body[length_at]) return std::nullopt;
+    const auto key = split_key(text_of(body.subspan(from)).substr(0, body[length_at]));
+    if (!key) return std::nullopt;
+    nlohmann::json value = decode_value(key->first, body.subspan(from + body[length_at]));
+    return std::pair{clean_text(key->second), std::move(value)};
+  }
+
+  // 'I': an information value; 'P': a parameter, its first value, or one changed in flight.
+  bool info_or_parameter(char type, std::span<const std::uint8_t> body, std::size_t pos) {
+    auto key_value = read_key_value(body, 0);
+    if (!key_value) return malformed(type, pos);
+    auto& [name, value] = *key_value;
+    if (type == 'I') {
+      log_.info[name] = std::move(value);
+    } else if (in_data_) {
+      log_.param_changes.push_back({last_timestamp_, name, std::move(value)});
+    } else {
+      log_.params[name] = std::move(value);
+    }
+    return true;
+  }
+
+  // 'M': a multi-message information value, maybe continuing the last; 'Q': a parameter's default.
+  bool multi_info_or_default(char type, std::span<const std::uint8_t> body, std::size_t pos) {
+    auto key_value = read_key_value(body, 1);
+    if (!key_value) return malformed(type, pos);
+    auto& [name, value] = *key_value;
+    if (type == 'Q') {
+      log_.default_params[name] = {
+          {"value", std::move(value)}, {"system", (body[0] & 1) != 0}, {"airframe", (body[0] & 2) != 0}};
+      return true;
+    }
+    auto& values = log_.multi_info[name];
+    if (!values.is_array()) values = nlohmann::json::array();
+    // A continued value is the rest of the previous one (long strings are split over messages).
+    if (body[0] != 0 && !values.empty() && values.back().is_string() && value.is_string()) {
+      values.back() = values.back().get<std::string>() + value.get<std::string>();
+    } else {
+      values.push_back(std::move(value));
+    }
+    return true;
+  }
+
+  // 'L': a logged string; 'C': one with a tag.
+  bool logged_string(char type, std::span<const std::uint8_t> body, std::size_t pos) {
+    const std::size_t header = type == 'L' ? 9 : 11;
+    if (body.size() < header) return malformed(type, pos);
+    LoggedString s{.level = body[0]};
+    if (type == 'C') s.tag = load<std::uint16_t>(body.data() + 1);
+    s.timestamp_us = load<std::uint64_t>(body.data() + header - 8);
+    s.text = clean_text(text_of(body.subspan(header)));
+    log_.strings.push_back(std::move(s));
+    return true;
   }
 
   bool malformed(char type, std::size_t) {
