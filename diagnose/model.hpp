@@ -129,9 +129,11 @@ class Model {
 
 struct FitOutcome {
   std::vector<double> values;
-  std::vector<double> std_errors;   // NaN when the covariance could not be computed
-  Eigen::MatrixXd correlation;      // of the estimates; empty when the covariance could not be computed
-  std::string covariance_failure;   // why not, or empty
+  std::vector<double> std_errors;  // NaN when the covariance could not be computed
+  Eigen::MatrixXd correlation;     // of the estimates; empty when the covariance could not be computed
+  std::string covariance_failure;  // why not, or empty
+  // Why some standard errors are NaN though the covariance was computed (parameters held on a bound), or empty.
+  std::string std_error_note;
   std::vector<double> convergence;  // sqrt(sum of squared residuals) at the start and after each iteration
   int iterations = 0;
   bool converged = false;

@@ -174,7 +174,7 @@ ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range 
   out.rmse_train = model.rmse(fit.values, train);
   out.rmse_validation = model.rmse(fit.values, validation);
   out.convergence = fit.convergence;
-  out.std_error_failure = fit.covariance_failure;
+  out.std_error_failure = fit.covariance_failure.empty() ? fit.std_error_note : fit.covariance_failure;
   return out;
 }
 

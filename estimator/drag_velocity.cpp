@@ -188,7 +188,7 @@ void DragVelocityEstimator::fuse_axis(int axis, const WindLinearisation& w, Drag
   const double wind_now = windy_ ? w.wind[axis] + w.jacobian.row(axis).dot(x_.segment<2>(2) - w.predicted_tilt) : 0.0;
   out.prior_air_velocity[axis] = x_[axis] - wind_now;
   out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
-  const double prior_slope = drag_slope(k, mu, out.prior_air_velocity[axis]);
+  const double prior_slope = fusion_slope(axis, out.prior_air_velocity[axis]);
   out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
   if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
     out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
@@ -319,7 +319,7 @@ Eigen::Vector2d DragVelocityEstimator::wind_in_body(Eigen::Matrix2d* jacobian) c
 
 void DragVelocityEstimator::fuse_air_velocity(int axis, double air, double wind, const Eigen::Vector2d& jacobian) {
   const double predicted = x_[axis] - wind;
-  const double slope = drag_slope(params_.drag_linear[axis], params_.drag_quadratic[axis], predicted);
+  const double slope = fusion_slope(axis, predicted);
   if (!(slope > 0.0)) return;
   const double r = config_.accel_noise * config_.accel_noise / (slope * slope);
   Vector6d h = Vector6d::Zero();
@@ -332,10 +332,20 @@ void DragVelocityEstimator::fuse_air_velocity(int axis, double air, double wind,
   p_ = (0.5 * (p_ + p_.transpose())).eval();
 }
 
+double DragVelocityEstimator::fusion_slope(int axis, double predicted) const {
+  // The law's slope averaged over the prediction's spread (statistical linearisation): sqrt(E[slope^2]) for a velocity
+  // of variance P about `predicted`. Taken at the prediction alone, a quadratic law has no slope at rest, and a filter
+  // hovering there would never again listen to the accelerometer, though a reading near zero does say the speed is
+  // small: |v| within sqrt(noise / mu).
+  const double k = params_.drag_linear[axis], mu = params_.drag_quadratic[axis];
+  const double at_prediction = drag_slope(k, mu, predicted);
+  return std::sqrt(at_prediction * at_prediction + 4.0 * mu * mu * p_(axis, axis));
+}
+
 void DragVelocityEstimator::fuse_velocity(int axis, double v_measured) {
   // The inversion's noise is the accelerometer's divided by the law's slope, taken at the prediction rather than at
   // the noisy measurement. A zero slope (pure quadratic drag at rest) carries no information: skip.
-  const double slope = drag_slope(params_.drag_linear[axis], params_.drag_quadratic[axis], x_[axis]);
+  const double slope = fusion_slope(axis, x_[axis]);
   if (!(slope > 0.0)) return;
   const double r = config_.accel_noise * config_.accel_noise / (slope * slope);
   const Vector6d gain = p_.col(axis) / (p_(axis, axis) + r);

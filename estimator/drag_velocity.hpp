@@ -151,6 +151,8 @@ class DragVelocityEstimator {
   void restart_window();
   void predict(double dt, const Eigen::Vector3d& w_measured);
   void fuse_velocity(int axis, double v_measured);
+  // |d drag / d v| on `axis` for fusing there (its noise is the accelerometer's divided by it).
+  double fusion_slope(int axis, double predicted) const;
   // Turns the heading by `angle` (rad).
   void turn_heading(double angle);
   // The wind in body x, y at the state's tilt and heading, and its Jacobian by (gamma_x, gamma_y).

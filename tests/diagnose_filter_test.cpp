@@ -161,5 +161,58 @@ TEST(FromTheImuAlone, TheFitDoesNotDependOnHowManyThreadsShareItsJacobian) {
   EXPECT_LT(one.convergence.back(), one.convergence.front());  // it did fit
 }
 
+// The paper's own flight as it flies (its quadratic drag, mu = 0.0386 1/m, nothing hidden) with the paper's model,
+// from the IMU alone: nothing is missing, so nothing may be added. With the filter fusing at the slope of its
+// prediction alone, which the quadratic law does not have near rest, a linear drag was added here (k = 0.017, 0.006
+// 1/s) and mu fell to 0.017, 0.006 (docs/effects.md, "Control flights"; scripts/effects-sweep --controls).
+TEST(FromTheImuAlone, ThePaperFlightAsItFliesAddsNothingToThePaperModel) {
+  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", 22, 120.0, {})));
+  series.reference.reset();
+  DiagnoseOptions options;
+  options.model = ModelKind::paper;
+  options.train = {0.0, 60.0};
+  options.validate = {60.0, 120.0};
+  options.max_steps = 1;
+  const Diagnosis d = run_diagnosis(series, options);
+  EXPECT_EQ(d.velocity_source, "filter");
+  EXPECT_TRUE(d.steps.empty()) << "added " << d.steps.front().effect;
+}
+
+// On a simulated flight (no unmodelled acceleration) the filter's process noise settles on its floor, where it moves
+// nothing: its Jacobian column is zero there. Held on the bound for the covariance, it leaves the other parameters'
+// standard errors computable; else each candidate's would be unknown, and --judge-by-flight refuses every one of
+// them as undetermined (docs/effects.md, "Control flights").
+TEST(DiagnoseCovariance, AParameterOnItsBoundLeavesTheOthersStandardErrors) {
+  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, 20.0, {})));
+  series.reference.reset();
+  const Signals signals = prepare_signals(series);
+  DiagnoseOptions options;
+  const estimator::TimeWindow whole{0.0, 20.0};
+  options.train = whole;
+  options.validate = whole;
+  ModelSetup setup;
+  setup.base = ModelKind::full;
+  setup.signals = &signals;
+  use_filter(setup, signals, options);
+  const Model model(signals, setup, {find_effect("quadratic_drag")});
+  const Range train = range_of(signals, whole);
+  std::vector<double> start = model.base_start(train);
+  for (std::size_t i = start.size(); i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+  const std::size_t noise = model.base_size() - 1;
+  ASSERT_EQ(model.parameters()[noise].name, Model::kProcessNoiseParameter);
+  start[noise] = model.parameters()[noise].lower;
+  const FitOutcome f = fit(model, start, train, 6, FitStop::cost, 1);
+  ASSERT_EQ(f.values[noise], model.parameters()[noise].lower)
+      << "the flight did not keep the process noise on its floor";
+  EXPECT_TRUE(f.covariance_failure.empty()) << f.covariance_failure;
+  for (std::size_t i = 0; i < f.values.size(); ++i) {
+    if (i == noise)
+      EXPECT_TRUE(std::isnan(f.std_errors[i]));
+    else
+      EXPECT_TRUE(std::isfinite(f.std_errors[i])) << model.parameters()[i].name;
+  }
+  EXPECT_NE(f.std_error_note.find(std::string(Model::kProcessNoiseParameter)), std::string::npos) << f.std_error_note;
+}
+
 }  // namespace
 }  // namespace imubridge::diagnose

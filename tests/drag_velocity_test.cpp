@@ -456,7 +456,7 @@ TEST(DragVelocityEstimator, RefusesBadParamsAndConfigs) {
   c = DragVelocityConfig{};
   c.max_rate = std::nan("");
   EXPECT_THROW(DragVelocityEstimator(flight_params(), c), std::invalid_argument);
-  // Pure quadratic drag (the paper's) is accepted: the filter skips the uninformative zero-slope point.
+  // Pure quadratic drag (the paper's) is accepted.
   p = flight_params();
   p.drag_linear.setZero();
   EXPECT_NO_THROW(DragVelocityEstimator(p, DragVelocityConfig{}));
