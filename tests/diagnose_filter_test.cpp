@@ -130,27 +130,56 @@ TEST(FromTheImuAlone, LinearDragAndATimeOffset) {
   EXPECT_EQ(chosen(d), (std::vector<std::string>{"linear_drag", "time_offset"}));
 }
 
+// The full model with one effect, fitted from the IMU alone (velocity `filter`) on 20 s of the paper flight with
+// `sim_effects` hidden. Not movable: the model points at the signals.
+class FilterFit {
+ public:
+  FilterFit(const std::vector<std::string>& sim_effects, const char* effect)
+      : signals(prepare_signals(imu_alone(sim_effects))),
+        model(signals, filter_setup(signals), {find_effect(effect)}),
+        train(range_of(signals, kWhole)) {}
+  FilterFit(const FilterFit&) = delete;
+  FilterFit& operator=(const FilterFit&) = delete;
+
+  // The base's own start, then each effect parameter's initial value.
+  std::vector<double> start() const {
+    std::vector<double> p = model.base_start(train);
+    for (std::size_t i = p.size(); i < model.parameters().size(); ++i) p.push_back(model.parameters()[i].initial);
+    return p;
+  }
+
+  const Signals signals;
+  const Model model;
+  const Range train;
+
+ private:
+  static constexpr estimator::TimeWindow kWhole{0.0, 20.0};
+  static estimator::ImuSeries imu_alone(const std::vector<std::string>& sim_effects) {
+    estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, 20.0, sim_effects)));
+    series.reference.reset();
+    return series;
+  }
+  static ModelSetup filter_setup(const Signals& signals) {
+    DiagnoseOptions options;
+    options.train = kWhole;
+    options.validate = kWhole;
+    ModelSetup setup;
+    setup.base = ModelKind::full;
+    setup.signals = &signals;
+    use_filter(setup, signals, options);
+    return setup;
+  }
+};
+
 // The filter error method's Jacobian is shared among threads, each column on a model of its own: the fit must not
 // depend on how many threads there are, to the last bit (same bytes and options, same estimates), and a column
 // written by the wrong thread or read before it is done would show here.
 TEST(FromTheImuAlone, TheFitDoesNotDependOnHowManyThreadsShareItsJacobian) {
-  const std::vector<std::string> drag{"linear_drag=1"};
-  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, 20.0, drag)));
-  series.reference.reset();
-  const Signals signals = prepare_signals(series);
-  DiagnoseOptions options;
-  const estimator::TimeWindow whole{0.0, 20.0};
-  options.train = whole;
-  options.validate = whole;
-  ModelSetup setup;
-  setup.base = ModelKind::full;
-  setup.signals = &signals;
-  use_filter(setup, signals, options);
-  const Model model(signals, setup, {find_effect("linear_drag")});
+  const FilterFit f({"linear_drag=1"}, "linear_drag");
+  const Model& model = f.model;
+  const Range train = f.train;
   ASSERT_TRUE(model.filter_runs());
-  const Range train = range_of(signals, whole);
-  std::vector<double> start = model.base_start(train);
-  for (std::size_t i = start.size(); i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+  const std::vector<double> start = f.start();
   const FitOutcome one = fit(model, start, train, 6, FitStop::cost, 1);
   for (unsigned threads : {2u, 3u}) {
     const FitOutcome shared = fit(model, start, train, 6, FitStop::cost, threads);
@@ -183,21 +212,10 @@ TEST(FromTheImuAlone, ThePaperFlightAsItFliesAddsNothingToThePaperModel) {
 // standard errors computable; else each candidate's would be unknown, and --judge-by-flight refuses every one of
 // them as undetermined (docs/effects.md, "Control flights").
 TEST(DiagnoseCovariance, AParameterOnItsBoundLeavesTheOthersStandardErrors) {
-  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, 20.0, {})));
-  series.reference.reset();
-  const Signals signals = prepare_signals(series);
-  DiagnoseOptions options;
-  const estimator::TimeWindow whole{0.0, 20.0};
-  options.train = whole;
-  options.validate = whole;
-  ModelSetup setup;
-  setup.base = ModelKind::full;
-  setup.signals = &signals;
-  use_filter(setup, signals, options);
-  const Model model(signals, setup, {find_effect("quadratic_drag")});
-  const Range train = range_of(signals, whole);
-  std::vector<double> start = model.base_start(train);
-  for (std::size_t i = start.size(); i < model.parameters().size(); ++i) start.push_back(model.parameters()[i].initial);
+  const FilterFit flight({}, "quadratic_drag");
+  const Model& model = flight.model;
+  const Range train = flight.train;
+  std::vector<double> start = flight.start();
   const std::size_t noise = model.base_size() - 1;
   ASSERT_EQ(model.parameters()[noise].name, Model::kProcessNoiseParameter);
   start[noise] = model.parameters()[noise].lower;
