@@ -759,55 +759,6 @@ std::vector<std::size_t> on_bound(const Model& model, std::span<const double> x)
   return pinned;
 }
 
-// The covariance (J^T J)^-1 with the parameters `pinned` held, as a full-size matrix (zero rows and columns for them
-// and for inert ones), or nullopt when the rest is rank-deficient too. A parameter on its bound can move nothing
-// there (the filter's process noise at its floor, where the filter no longer listens to it): its zero column makes
-// the whole covariance singular, and every other parameter's standard error unknown, though the data determine them.
-// Ceres' rule for the rank (DENSE_SVD's default): the smallest eigenvalue of J^T J at least 1e-14 of the largest.
-std::optional<Eigen::MatrixXd> covariance_without(ceres::Problem& problem, const Model& model,
-                                                  std::span<const std::size_t> pinned) {
-  ceres::CRSMatrix crs;
-  problem.Evaluate(ceres::Problem::EvaluateOptions(), nullptr, nullptr, nullptr, &crs);
-  // The Jacobian's columns are the non-inert parameters, in order (the others are held by a SubsetManifold).
-  std::vector<std::size_t> column_of_parameter;
-  std::vector<Eigen::Index> kept_columns;
-  for (std::size_t i = 0, column = 0; i < model.parameters().size(); ++i) {
-    if (model.inert(i)) continue;
-    if (std::find(pinned.begin(), pinned.end(), i) == pinned.end()) {
-      column_of_parameter.push_back(i);
-      kept_columns.push_back(static_cast<Eigen::Index>(column));
-    }
-    ++column;
-  }
-  const auto n = static_cast<Eigen::Index>(kept_columns.size());
-  std::vector<Eigen::Index> kept_index(static_cast<std::size_t>(crs.num_cols), -1);
-  for (Eigen::Index k = 0; k < n; ++k) kept_index[static_cast<std::size_t>(kept_columns[k])] = k;
-  Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(n, n);
-  Eigen::VectorXd row(n);
-  for (int r = 0; r < crs.num_rows; ++r) {
-    row.setZero();
-    for (int e = crs.rows[r]; e < crs.rows[r + 1]; ++e) {
-      const Eigen::Index k = kept_index[static_cast<std::size_t>(crs.cols[e])];
-      if (k >= 0) row[k] = crs.values[e];
-    }
-    jtj.selfadjointView<Eigen::Lower>().rankUpdate(row);
-  }
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(jtj.selfadjointView<Eigen::Lower>());
-  if (eigen.info() != Eigen::Success || n == 0) return std::nullopt;
-  const Eigen::VectorXd& lambda = eigen.eigenvalues();  // ascending
-  if (!(lambda[0] >= 1e-14 * lambda[n - 1])) return std::nullopt;
-  const Eigen::MatrixXd reduced =
-      eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
-  const auto size = static_cast<Eigen::Index>(model.parameters().size());
-  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(size, size);
-  for (Eigen::Index a = 0; a < n; ++a) {
-    for (Eigen::Index b = 0; b < n; ++b)
-      c(static_cast<Eigen::Index>(column_of_parameter[static_cast<std::size_t>(a)]),
-        static_cast<Eigen::Index>(column_of_parameter[static_cast<std::size_t>(b)])) = reduced(a, b);
-  }
-  return c;
-}
-
 // Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same), at
 // out.values, the problem's one parameter block.
 void standard_errors(ceres::Problem& problem, const Model& model, std::size_t residual_count, FitOutcome& out) {
@@ -824,19 +775,33 @@ void standard_errors(ceres::Problem& problem, const Model& model, std::size_t re
   const std::vector<const double*> blocks{x};
   std::optional<Eigen::MatrixXd> c;
   std::vector<std::size_t> held_on_bound;
+  const auto held = [&](std::size_t i) {
+    return model.inert(i) || std::find(held_on_bound.begin(), held_on_bound.end(), i) != held_on_bound.end();
+  };
   if (covariance.Compute(blocks, &problem)) {
     c.emplace(params.size(), params.size());
     covariance.GetCovarianceBlock(x, x, c->data());  // symmetric: storage order does not matter
   } else if (held_on_bound = on_bound(model, out.values); !held_on_bound.empty()) {
-    c = covariance_without(problem, model, held_on_bound);
+    // A parameter on its bound can move nothing there (the filter's process noise on its floor): its zero column
+    // makes the whole covariance singular, and every other standard error unknown, though the data determine them.
+    // Held there with the inert ones, it leaves the others' computable.
+    std::vector<int> constant;
+    for (std::size_t i = 0; i < params.size(); ++i) {
+      if (held(i)) constant.push_back(static_cast<int>(i));
+    }
+    problem.SetManifold(x, new ceres::SubsetManifold(static_cast<int>(params.size()), constant));
+    ceres::Covariance without(covariance_options);
+    if (without.Compute(blocks, &problem)) {
+      c.emplace(params.size(), params.size());
+      without.GetCovarianceBlock(x, x, c->data());
+    }
   }
   if (!c) {
     out.covariance_failure = "the Jacobian is rank-deficient: some parameters cannot be told apart with these data";
     return;
   }
   for (std::size_t i = 0; i < params.size(); ++i) {
-    const bool held = model.inert(i) || std::find(held_on_bound.begin(), held_on_bound.end(), i) != held_on_bound.end();
-    if (!held)
+    if (!held(i))
       out.std_errors[i] = std::sqrt(variance * (*c)(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)));
   }
   const Eigen::VectorXd inverse_sd = c->diagonal().cwiseSqrt().cwiseInverse();
