@@ -347,6 +347,28 @@ bool Model::filter_runs() const {
           std::any_of(effects_.begin(), effects_.end(), [](const Effect* e) { return e->adds_drag(); }));
 }
 
+std::vector<Vector3d> Model::accel_without_lever_arm(const estimator::FullModelParams& params,
+                                                    std::span<const Vector3d> gyro, std::size_t count) const {
+  const Signals& s = signals();
+  std::vector<Vector3d> gyro_rate_shifted;
+  if (params.time_offset != 0.0) gyro_rate_shifted = delayed(s.t, s.gyro_rate, params.time_offset);
+  const std::span<const Vector3d> gyro_rate =
+      gyro_rate_shifted.empty() ? std::span<const Vector3d>(s.gyro_rate) : gyro_rate_shifted;
+  const Eigen::Matrix3d imu_to_body = rotation_matrix(params.mounting);
+  const Eigen::Matrix3d sensor =
+      Eigen::Matrix3d::Identity() + Eigen::Matrix3d(params.accel_scale.asDiagonal()) + params.accel_cross;
+  // LeverArmCompensator's f = R_bs S^-1 (m - b) - L with L taken out of m instead: m - S R_bs^T L.
+  const Eigen::Matrix3d body_to_reading = sensor * imu_to_body.transpose();
+  const Vector3d& r = params.lever_arm;
+  std::vector<Vector3d> accel(count);
+  for (std::size_t k = 0; k < count; ++k) {
+    const Vector3d w = imu_to_body * (gyro[k] - params.gyro_bias);
+    const Vector3d w_dot = imu_to_body * gyro_rate[k];
+    accel[k] = s.accel[k] - body_to_reading * (w_dot.cross(r) + w.cross(w.cross(r)));
+  }
+  return accel;
+}
+
 void Model::filter_velocity(std::span<const double> p, std::size_t until, std::vector<Vector3d>& velocity) const {
   const Signals& s = signals();
   // The model as the live estimator runs it (effects it cannot run, such as vibration, act after stage 3 only).
@@ -356,21 +378,34 @@ void Model::filter_velocity(std::span<const double> p, std::size_t until, std::v
   std::vector<Vector3d> shifted;
   if (params.time_offset != 0.0) shifted = delayed(s.t, s.gyro, params.time_offset);
   const std::span<const Vector3d> gyro = shifted.empty() ? std::span<const Vector3d>(s.gyro) : shifted;
-  params.time_offset = 0.0;
+  // The lever arm's reading is taken out at the full rate, where the smoothed derivative follows the manoeuvres, and
+  // the filter runs without one. On block means its own differentiator spans five blocks (160 ms at 25 Hz) and misses
+  // an agile flight's angular acceleration: the filter read the lever arm's r * w_dot as drag (docs/effects.md).
+  estimator::FullModelParams filtered = params;
+  filtered.lever_arm.setZero();
+  filtered.time_offset = 0.0;
   estimator::DragVelocityConfig config = setup_.filter;
   config.accel_process_noise = process_noise(p);
-  estimator::DragVelocityEstimator filter(params, config);
+  estimator::DragVelocityEstimator filter(filtered, config);
   const std::size_t block = setup_.filter_block;
   const std::size_t delay = static_cast<std::size_t>(filter.delay_samples());
   // Block j's estimate comes delay_samples() blocks after it.
   const std::size_t blocks = until == 0 ? 0 : std::min(s.size() / block, (until - 1) / block + 1 + delay);
-  // Without a time offset the block means are the same for every parameter: computed once (the longest run asked
-  // for is kept; a block's mean does not depend on how many are taken).
-  std::vector<estimator::ImuSample> shifted_means;
-  if (!shifted.empty()) shifted_means = block_means(s.t, gyro, s.accel, block, blocks);
-  if (shifted.empty() && block_means_.size() < blocks) block_means_ = block_means(s.t, gyro, s.accel, block, blocks);
+  std::vector<Vector3d> accel_without_lever;
+  if (params.lever_arm != Vector3d::Zero()) accel_without_lever = accel_without_lever_arm(params, gyro, blocks * block);
+  // Without a time offset or a lever arm the block means are the same for every parameter: computed once (the longest
+  // run asked for is kept; a block's mean does not depend on how many are taken).
+  const bool same_for_every_parameter = shifted.empty() && accel_without_lever.empty();
+  std::vector<estimator::ImuSample> own_means;
+  if (!same_for_every_parameter) {
+    const std::span<const Vector3d> accel =
+        accel_without_lever.empty() ? std::span<const Vector3d>(s.accel) : accel_without_lever;
+    own_means = block_means(s.t, gyro, accel, block, blocks);
+  }
+  if (same_for_every_parameter && block_means_.size() < blocks)
+    block_means_ = block_means(s.t, gyro, s.accel, block, blocks);
   const std::span<const estimator::ImuSample> means =
-      shifted.empty() ? std::span<const estimator::ImuSample>(block_means_).first(blocks) : shifted_means;
+      same_for_every_parameter ? std::span<const estimator::ImuSample>(block_means_).first(blocks) : own_means;
   velocity.resize(s.size());  // every sample is written below: those before `until` here, the rest zeroed at the end
   // Every sample of block j takes the prediction for block j, made from the blocks before it; samples the filter
   // holds no estimate for (the first blocks, those a time offset's aligner waits on) keep the last prediction.

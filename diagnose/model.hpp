@@ -94,6 +94,10 @@ class Model {
   // block means; its one-step-ahead air velocity per sample (so that the residual is the filter's innovation), into
   // `velocity` (resized to the series).
   void filter_velocity(std::span<const double> p, std::size_t until, std::vector<Eigen::Vector3d>& velocity) const;
+  // The measured specific force of samples [0, count) (IMU axes) without the lever arm's reading, at the full rate:
+  // from the rotation rate `gyro` (time-shifted as the filter sees it) and the signals' smoothed derivative.
+  std::vector<Eigen::Vector3d> accel_without_lever_arm(const estimator::FullModelParams& params,
+                                                       std::span<const Eigen::Vector3d> gyro, std::size_t count) const;
   // The inputs for p, recomputed only when a parameter they depend on changed: most of a numeric Jacobian's
   // evaluations perturb parameters that act after stage 3. Not thread-safe (the fit is single-threaded).
   const ModelInputs& inputs_for(std::span<const double> p, std::size_t until) const;

@@ -74,7 +74,7 @@ std::size_t identification_block(double rate_hz) {
 
 std::vector<estimator::ImuSample> block_means(std::span<const double> t, std::span<const Vector3d> gyro,
                                               std::span<const Vector3d> accel, std::size_t block, std::size_t blocks) {
-  if (block == 0 || blocks * block > t.size() || gyro.size() != t.size() || accel.size() != t.size())
+  if (block == 0 || blocks * block > std::min({t.size(), gyro.size(), accel.size()}))
     throw std::invalid_argument("block_means: blocks beyond the signals");
   std::vector<estimator::ImuSample> out(blocks);
   const double scale = 1.0 / static_cast<double>(block);
