@@ -21,7 +21,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/pty.hpp"
+#include "cli/pty.hpp"
 #include "protocol/wire_format.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"

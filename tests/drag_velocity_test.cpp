@@ -12,7 +12,7 @@
 
 #include "estimator/constants.hpp"
 #include "estimator/drag_law.hpp"
-#include "estimator/identify.hpp"
+#include "identification/identify.hpp"
 
 namespace imubridge::estimator {
 namespace {

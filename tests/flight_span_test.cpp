@@ -1,6 +1,6 @@
 // The flight found from the IMU alone: a recording that rests, flies with the rotors' vibration and rests again gives
 // the flying part; one without a quiet part gives none; and how much of a window lies in the flight.
-#include "estimator/flight_span.hpp"
+#include "identification/flight_span.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,5 +1,5 @@
 // The bounded real-coded GA on objectives whose minimum is known in closed form.
-#include "estimator/ga.hpp"
+#include "identification/ga.hpp"
 
 #include <gtest/gtest.h>
 

@@ -13,7 +13,7 @@
 #include <string>
 
 #include "estimator/constants.hpp"
-#include "estimator/identify.hpp"
+#include "identification/identify.hpp"
 #include "pipeline/session_series.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"

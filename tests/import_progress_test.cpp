@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/import_progress_line.hpp"
+#include "cli/import_progress_line.hpp"
 #include "replay/euroc_import.hpp"
 #include "replay/tlog.hpp"
 #include "replay/tlog_import.hpp"

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "estimator/identify.hpp"
+#include "identification/identify.hpp"
 #include "pipeline/estimation_stage.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"

@@ -1,5 +1,5 @@
 // The plausibility table: values no airframe has are named with their limit, and the limits can be overridden.
-#include "estimator/plausibility.hpp"
+#include "identification/plausibility.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "estimator/precise_solve.hpp"
+#include "identification/precise_solve.hpp"
 
 #include <ceres/ceres.h>
 #include <gtest/gtest.h>

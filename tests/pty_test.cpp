@@ -1,7 +1,7 @@
 // cli::PtyPair, the pseudo-terminal that `imubridge sim --pty`, `replay --to-pty` and the daemon tests write into:
 // what a reader on the slave gets, what is dropped when nobody reads, and that drain() keeps the tail from being
 // discarded when the pair closes.
-#include "daemon/pty.hpp"
+#include "cli/pty.hpp"
 
 #include <fcntl.h>
 #include <gtest/gtest.h>

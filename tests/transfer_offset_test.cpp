@@ -6,9 +6,9 @@
 #include <vector>
 
 #include "estimator/drag_velocity.hpp"
-#include "estimator/identify.hpp"
 #include "estimator/params.hpp"
-#include "estimator/velocity_scores.hpp"
+#include "identification/identify.hpp"
+#include "identification/velocity_scores.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"

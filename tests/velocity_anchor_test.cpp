@@ -6,7 +6,7 @@
 #include <random>
 #include <stdexcept>
 
-#include "estimator/velocity_scores.hpp"
+#include "identification/velocity_scores.hpp"
 
 namespace imubridge::estimator {
 namespace {
