@@ -18,9 +18,9 @@
 #include <thread>
 #include <vector>
 
+#include "cli/pty.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/endpoint.hpp"
-#include "daemon/pty.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 

@@ -4,7 +4,7 @@
 
 #include <vector>
 
-#include "estimator/identify.hpp"
+#include "identification/identify.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 

@@ -18,7 +18,7 @@
 #include "daemon/live_sinks.hpp"
 #include "daemon/mqtt_output.hpp"
 #include "daemon/outputs.hpp"
-#include "tests/loopback_port.hpp"
+#include "tests/support/loopback_port.hpp"
 
 namespace imubridge::daemon {
 namespace {

@@ -15,8 +15,8 @@
 
 #include "diagnose/filter_identification.hpp"
 #include "diagnose/search.hpp"
-#include "estimator/flight_span.hpp"
-#include "estimator/identify.hpp"
+#include "identification/flight_span.hpp"
+#include "identification/identify.hpp"
 #include "pipeline/session_series.hpp"
 #include "replay/euroc_import.hpp"
 #include "scratch_dir.hpp"

@@ -16,7 +16,7 @@
 #include "archive/sync.hpp"
 #include "bench/scratch_dir.hpp"
 #include "store/store.hpp"
-#include "tests/postgres_server.hpp"
+#include "tests/support/postgres_server.hpp"
 
 namespace imubridge::archive {
 namespace {

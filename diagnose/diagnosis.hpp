@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "estimator/params.hpp"
-#include "estimator/velocity_scores.hpp"
+#include "identification/velocity_scores.hpp"
 
 namespace imubridge::diagnose {
 

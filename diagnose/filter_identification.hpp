@@ -3,8 +3,8 @@
 // error method (docs/identification.md, "From the IMU alone"). It is diagnose's model with the drag-velocity filter
 // as its velocity (velocity `filter`) and the effects that make up identify's blocks, fitted once: one
 // mechanism for identify and diagnose.
-#include "estimator/identify.hpp"
 #include "estimator/imu_series.hpp"
+#include "identification/identify.hpp"
 
 namespace imubridge::diagnose {
 

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "estimator/identify.hpp"
+#include "identification/identify.hpp"
 
 namespace imubridge::diagnose {
 

@@ -21,9 +21,9 @@
 #include "estimator/constants.hpp"
 #include "estimator/drag_law.hpp"
 #include "estimator/full_model.hpp"
-#include "estimator/least_squares.hpp"
-#include "estimator/precise_solve.hpp"
 #include "estimator/velocity.hpp"
+#include "identification/least_squares.hpp"
+#include "identification/precise_solve.hpp"
 
 namespace imubridge::diagnose {
 namespace {

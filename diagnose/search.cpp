@@ -18,9 +18,9 @@
 #include "diagnose/model.hpp"
 #include "diagnose/residual_analysis.hpp"
 #include "diagnose/signals.hpp"
-#include "estimator/identify.hpp"
-#include "estimator/plausibility.hpp"
-#include "estimator/velocity_scores.hpp"
+#include "identification/identify.hpp"
+#include "identification/plausibility.hpp"
+#include "identification/velocity_scores.hpp"
 
 namespace imubridge::diagnose {
 namespace {

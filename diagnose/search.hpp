@@ -17,7 +17,7 @@
 #include "diagnose/signals.hpp"
 #include "estimator/imu_series.hpp"
 #include "estimator/params.hpp"
-#include "estimator/plausibility.hpp"
+#include "identification/plausibility.hpp"
 
 namespace imubridge::diagnose {
 

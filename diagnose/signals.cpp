@@ -5,8 +5,8 @@
 #include <string>
 
 #include "diagnose/residual_analysis.hpp"
-#include "estimator/identify.hpp"
 #include "estimator/velocity.hpp"
+#include "identification/identify.hpp"
 
 namespace imubridge::diagnose {
 namespace {

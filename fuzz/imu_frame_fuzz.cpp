@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "protocol/imu_frame.hpp"
-#include "tests/decoder_harness.hpp"
+#include "tests/support/decoder_harness.hpp"
 
 namespace {
 

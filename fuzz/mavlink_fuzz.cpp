@@ -12,7 +12,7 @@
 
 #include "fuzz/fuzz_require.hpp"
 #include "protocol/mavlink.hpp"
-#include "tests/decoder_harness.hpp"
+#include "tests/support/decoder_harness.hpp"
 
 namespace mavlink = imubridge::protocol::mavlink;
 namespace harness = imubridge::protocol::harness;

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "protocol/xbee.hpp"
-#include "tests/decoder_harness.hpp"
+#include "tests/support/decoder_harness.hpp"
 
 #ifndef IMUBRIDGE_XBEE_FUZZ_MODE
 #define IMUBRIDGE_XBEE_FUZZ_MODE unescaped

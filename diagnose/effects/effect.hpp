@@ -25,8 +25,8 @@
 
 #include "diagnose/signals.hpp"
 #include "estimator/drag_velocity.hpp"
-#include "estimator/identify_choices.hpp"
 #include "estimator/paper_model.hpp"
+#include "identification/identify_choices.hpp"
 
 namespace imubridge::diagnose {
 
