@@ -1,5 +1,5 @@
 #pragma once
-// Each subcommand lives in daemon/commands/<name>.cpp and registers itself with the program's parser.
+// Each subcommand lives in cli/commands/<name>.cpp and registers itself with the program's parser.
 // A command's run function returns the process exit code: 0 success, 1 runtime failure, 2 bad usage/config.
 #include <functional>
 #include <vector>

@@ -76,7 +76,7 @@ struct ModelFit {
   // Parameters at or within 1 % of a bound of their search range: the data pushed them there, so their value says
   // more about the range than about the vehicle. One readable line each.
   std::vector<std::string> at_bounds;
-  // Values beyond the plausibility table (estimator/plausibility.hpp), one line each (a candidate with any is refused;
+  // Values beyond the plausibility table (identification/plausibility.hpp), one line each (a candidate with any is refused;
   // the base model is reported with them).
   std::vector<std::string> implausible;
   std::optional<estimator::VelocityScores> velocity;  // the estimator run with this model; with a reference only

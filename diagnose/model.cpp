@@ -794,7 +794,7 @@ std::vector<std::size_t> on_bound(const Model& model, std::span<const double> x)
   return pinned;
 }
 
-// Standard errors: (J^T J)^-1 scaled by the residual variance (estimator/least_squares.cpp does the same), at
+// Standard errors: (J^T J)^-1 scaled by the residual variance (identification/least_squares.cpp does the same), at
 // out.values, the problem's one parameter block.
 void standard_errors(ceres::Problem& problem, const Model& model, std::size_t residual_count, FitOutcome& out) {
   const std::vector<Parameter>& params = model.parameters();

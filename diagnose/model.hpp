@@ -145,14 +145,14 @@ struct FitOutcome {
 
 // How far LM goes: until a relative cost change of 1e-7, as diagnose needs to compare candidates by the costs they
 // reach (the F-test), or until the parameters are within a third of a standard error of the optimum
-// (estimator/precise_solve.hpp), which is all a fit that reports parameters can tell (identify).
+// (identification/precise_solve.hpp), which is all a fit that reports parameters can tell (identify).
 enum class FitStop { cost, parameter_precision };
 
 // The cores fits may spread over (never 0).
 using estimator::cores;
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
-// ceres::Covariance (dense SVD) scaled by the residual variance, as estimator/least_squares.cpp does. When the model
+// ceres::Covariance (dense SVD) scaled by the residual variance, as identification/least_squares.cpp does. When the model
 // runs the filter, its Jacobian's columns are shared among `jacobian_threads` threads; the result does not depend on
 // how many.
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50,

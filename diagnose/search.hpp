@@ -50,7 +50,7 @@ struct DiagnoseOptions {
   // The rules by what users fly with (docs/effects.md, "The velocity or likelihood rule"): a step must also lower the
   // validation velocity (with the reference) or raise the filter's likelihood (from the IMU alone), and a candidate
   // whose parameters the data do not determine is refused; of the candidates that pass, the one that flies best is
-  // taken. Opt-in (--judge-by-flight) until the simulated findings that tests/diagnose_search_test.cpp and
+  // taken. Opt-in (--judge-by-flight) until the simulated findings that tests/diagnose/diagnose_search_test.cpp and
   // diagnose_filter_test.cpp hold are re-established under them.
   bool judge_by_flight = false;
   // What "flies worse" means under those rules: a validation velocity RMSE higher by more than this share, or a

@@ -25,7 +25,7 @@ constexpr double kDegPerRad = 180.0 / kPi;
 constexpr double kAngleAgreement = 1e-9;  // rad
 
 // diagnose's library (diagnose/effects/library.cpp), in its order. The estimator does not link diagnose; a new
-// effect there must be added here (tests/live_model_test.cpp fails until it is); how the live estimator runs it is
+// effect there must be added here (tests/diagnose/live_model_test.cpp fails until it is); how the live estimator runs it is
 // the effect's own Effect::to_live.
 constexpr std::array<std::string_view, 12> kEffects = {
     "linear_drag", "quadratic_drag", "accel_bias",  "gyro_bias", "thrust", "time_offset",

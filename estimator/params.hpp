@@ -86,7 +86,7 @@ ModelParams for_flight(const ModelParams& params, std::string_view flight, std::
 // name is refused with the nearest known one ("did you mean"); `vibration` is refused with the reason.
 std::optional<std::string> live_effect_refusal(std::string_view effect);
 // The effects PARAMS.json may name: diagnose's library, in its order (the estimator does not link diagnose;
-// tests/live_model_test.cpp holds the two equal).
+// tests/diagnose/live_model_test.cpp holds the two equal).
 std::span<const std::string_view> known_effects();
 
 // Reading is strict. It fills missing keys with the defaults (so files written before a key existed still read)

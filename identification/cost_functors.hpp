@@ -1,6 +1,6 @@
 #pragma once
 // Residuals of the accelerometer models, templated for Ceres' automatic differentiation and kept apart from the
-// solving (estimator/least_squares.hpp), as in Ceres' examples. Each functor covers a run of consecutive samples
+// solving (identification/least_squares.hpp), as in Ceres' examples. Each functor covers a run of consecutive samples
 // rather than one: with one sample per residual block, Ceres' bookkeeping per block costs several times the model's
 // arithmetic. With T = double they are also what the GA's 3-D objective evaluates, so both methods minimise the
 // same thing.

@@ -45,7 +45,7 @@ struct IdentifyOptions {
 // percentages of the data's span instead ("0:40%" is its first 40 %, "40%:" the rest), which needs the samples'
 // times `t` to resolve. Throws std::invalid_argument otherwise.
 TimeWindow parse_window(std::string_view text, std::span<const double> t = {});
-// The same with percentages of `span` instead of the data's (e.g. the flight: estimator/flight_span.hpp).
+// The same with percentages of `span` instead of the data's (e.g. the flight: identification/flight_span.hpp).
 TimeWindow parse_window(std::string_view text, const TimeWindow& span);
 // The data's span: from the first sample to the end of the last, [t_0, t_last + last period).
 TimeWindow data_span(std::span<const double> t);

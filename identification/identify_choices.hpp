@@ -1,5 +1,5 @@
 #pragma once
-// The choices an identification (estimator/identify.hpp) and a diagnosis (diagnose/) are made with, and their
+// The choices an identification (identification/identify.hpp) and a diagnosis (diagnose/) are made with, and their
 // command-line spellings: which model, which solver, which velocity the drag term sees.
 #include <string_view>
 

@@ -1,5 +1,5 @@
 #pragma once
-// Levenberg-Marquardt fits of the accelerometer models with Ceres (autodiff through estimator/cost_functors.hpp), and
+// Levenberg-Marquardt fits of the accelerometer models with Ceres (autodiff through identification/cost_functors.hpp), and
 // the uncertainty of a solution: standard errors and correlations from ceres::Covariance, scaled by the residual
 // variance. Single-threaded and deterministic.
 #include <Eigen/Core>

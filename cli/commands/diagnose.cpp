@@ -244,7 +244,7 @@ dg::DiagnoseOptions search_options(const DiagnoseCliOptions& o) {
   return options;
 }
 
-// What is diagnosed: one session, or several flights joined (daemon/commands/flight_set_reading.hpp).
+// What is diagnosed: one session, or several flights joined (cli/commands/flight_set_reading.hpp).
 struct DiagnosedData {
   std::optional<pipeline::SessionSeries> session;
   std::optional<FlightSetReading> flights;

@@ -84,7 +84,7 @@ Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const
   return {anchor_step([&] { return est::fit_least_squares_drag(session.series, train); }), {id}, {train}};
 }
 // Several sessions: one line fitted over their windows together, as a calibration over several flights is
-// (estimator/flight_set.hpp joins them; the blocks never span two flights).
+// (identification/flight_set.hpp joins them; the blocks never span two flights).
 Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& ids, const EvaluateCliOptions& o) {
   if (ids.size() == 1) return fit_anchor(read_session(store, ids.front(), o), ids.front(), o);
   Anchor out;

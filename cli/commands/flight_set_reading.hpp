@@ -1,7 +1,7 @@
 #pragma once
 // Several flights for one fit (identify and diagnose, --session A,B,C --validate-session D,E): each session read,
 // cut to its own window (--train of a fitting flight, --validate of a validating one, each of its own flight), and
-// joined into one series with long gaps between them (estimator/flight_set.hpp). One definition for both commands.
+// joined into one series with long gaps between them (identification/flight_set.hpp). One definition for both commands.
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstddef>

@@ -251,7 +251,7 @@ void save(const IdentifyCliOptions& o, const est::IdentifyResult& result) {
   }
 }
 
-// Several flights (--session A,B,C, --validate-session D,E; daemon/commands/flight_set_reading.hpp), fitted on the
+// Several flights (--session A,B,C, --validate-session D,E; cli/commands/flight_set_reading.hpp), fitted on the
 // first ones and validated on the others. The conditions (biases, wind) fitted over several flights are no one
 // flight's: PARAMS.json names the set, so they fly on none.
 int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t>& fit_ids,

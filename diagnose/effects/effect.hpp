@@ -30,7 +30,7 @@
 
 namespace imubridge::diagnose {
 
-// The base model and the velocity the drag term sees are identify's choices (estimator/identify_choices.hpp):
+// The base model and the velocity the drag term sees are identify's choices (identification/identify_choices.hpp):
 // with the filter, its one-step prediction (the filter error method, docs/identification.md).
 using estimator::ModelKind;
 using estimator::VelocitySource;

@@ -1,4 +1,4 @@
-// Several flights joined into one series (estimator/flight_set.hpp): where each lands, what is kept, and that the
+// Several flights joined into one series (identification/flight_set.hpp): where each lands, what is kept, and that the
 // drag-velocity filter takes the gap between two flights as a pause, carrying nothing certain across it.
 #include "identification/flight_set.hpp"
 

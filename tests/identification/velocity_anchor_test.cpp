@@ -1,4 +1,4 @@
-// The least-squares anchor (estimator/velocity_scores.hpp): a = -k v + b on 0.1-s means, inverted raw and 1-s
+// The least-squares anchor (identification/velocity_scores.hpp): a = -k v + b on 0.1-s means, inverted raw and 1-s
 // smoothed, on its own flight and carried to another.
 #include <gtest/gtest.h>
 
