@@ -1,6 +1,6 @@
 // imubridge sync's throughput: a recorded session (samples as the imubridge frame gives them, with the live run's
 // estimate for each and a little reference) copied into a real, durable PostgreSQL server on this machine
-// (tests/postgres_server.hpp) by archive::sync_to_archive, as `imubridge sync --to` does; then a rerun, which finds
+// (tests/support/postgres_server.hpp) by archive::sync_to_archive, as `imubridge sync --to` does; then a rerun, which finds
 // nothing to send. Each iteration syncs into a fresh database. N stations (Arg) sync at once, each its own store
 // file and connection, into one archive, as a fleet's ground stations do. docs/performance.md, "Syncing to the
 // archive".
