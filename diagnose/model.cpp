@@ -355,10 +355,8 @@ std::vector<Vector3d> Model::accel_without_lever_arm(const estimator::FullModelP
   const std::span<const Vector3d> gyro_rate =
       gyro_rate_shifted.empty() ? std::span<const Vector3d>(s.gyro_rate) : gyro_rate_shifted;
   const Eigen::Matrix3d imu_to_body = rotation_matrix(params.mounting);
-  const Eigen::Matrix3d sensor =
-      Eigen::Matrix3d::Identity() + Eigen::Matrix3d(params.accel_scale.asDiagonal()) + params.accel_cross;
   // LeverArmCompensator's f = R_bs S^-1 (m - b) - L with L taken out of m instead: m - S R_bs^T L.
-  const Eigen::Matrix3d body_to_reading = sensor * imu_to_body.transpose();
+  const Eigen::Matrix3d body_to_reading = estimator::sensor_matrix(params) * imu_to_body.transpose();
   const Vector3d& r = params.lever_arm;
   std::vector<Vector3d> accel(count);
   for (std::size_t k = 0; k < count; ++k) {
@@ -391,21 +389,31 @@ void Model::filter_velocity(std::span<const double> p, std::size_t until, std::v
   const std::size_t delay = static_cast<std::size_t>(filter.delay_samples());
   // Block j's estimate comes delay_samples() blocks after it.
   const std::size_t blocks = until == 0 ? 0 : std::min(s.size() / block, (until - 1) / block + 1 + delay);
-  std::vector<Vector3d> accel_without_lever;
-  if (params.lever_arm != Vector3d::Zero()) accel_without_lever = accel_without_lever_arm(params, gyro, blocks * block);
-  // Without a time offset or a lever arm the block means are the same for every parameter: computed once (the longest
-  // run asked for is kept; a block's mean does not depend on how many are taken).
-  const bool same_for_every_parameter = shifted.empty() && accel_without_lever.empty();
-  std::vector<estimator::ImuSample> own_means;
-  if (!same_for_every_parameter) {
-    const std::span<const Vector3d> accel =
-        accel_without_lever.empty() ? std::span<const Vector3d>(s.accel) : accel_without_lever;
-    own_means = block_means(s.t, gyro, accel, block, blocks);
+  const bool lever = params.lever_arm != Vector3d::Zero();
+  const auto means_of = [&] {
+    return lever ? block_means(s.t, gyro, accel_without_lever_arm(params, gyro, blocks * block), block, blocks)
+                 : block_means(s.t, gyro, s.accel, block, blocks);
+  };
+  std::vector<estimator::ImuSample> shifted_means;
+  if (!shifted.empty()) {
+    shifted_means = means_of();
+  } else {
+    // Without a time offset the block means depend only on what makes the lever arm's reading, the same for most of
+    // a numeric Jacobian's evaluations (the drag's, the process noise's): kept with the values they were made for,
+    // the longest run asked for (a block's mean does not depend on how many are taken).
+    std::vector<double> key;
+    if (lever) {
+      for (const Vector3d* v : {&params.lever_arm, &params.mounting, &params.accel_scale, &params.gyro_bias})
+        key.insert(key.end(), v->data(), v->data() + 3);
+      key.insert(key.end(), params.accel_cross.data(), params.accel_cross.data() + 9);
+    }
+    if (key != block_means_key_ || block_means_.size() < blocks) {
+      block_means_ = means_of();
+      block_means_key_ = std::move(key);
+    }
   }
-  if (same_for_every_parameter && block_means_.size() < blocks)
-    block_means_ = block_means(s.t, gyro, s.accel, block, blocks);
   const std::span<const estimator::ImuSample> means =
-      same_for_every_parameter ? std::span<const estimator::ImuSample>(block_means_).first(blocks) : own_means;
+      shifted.empty() ? std::span<const estimator::ImuSample>(block_means_).first(blocks) : shifted_means;
   velocity.resize(s.size());  // every sample is written below: those before `until` here, the rest zeroed at the end
   // Every sample of block j takes the prediction for block j, made from the blocks before it; samples the filter
   // holds no estimate for (the first blocks, those a time offset's aligner waits on) keep the last prediction.

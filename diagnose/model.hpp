@@ -126,6 +126,7 @@ class Model {
   // velocity `filter`: the filter's input, block means of the samples without a time offset (filter_velocity). Not
   // thread-safe either.
   mutable std::vector<estimator::ImuSample> block_means_;
+  mutable std::vector<double> block_means_key_;  // the lever arm's values block_means_ were made for; empty: none
   // evaluate_into's and residuals()' working space, reused from one evaluation to the next. Not thread-safe either.
   mutable std::vector<Eigen::Vector3d> predicted_scratch_;
   mutable Evaluation residual_scratch_;

@@ -19,8 +19,7 @@ std::optional<std::string> validate(const FullModelParams& p) {
   if (p.accel_cross.diagonal() != Eigen::Vector3d::Zero()) return "accel_cross must have a zero diagonal";
   // The estimator inverts I + diag(scale) + cross; a non-positive determinant maps some force to zero or mirrors
   // the axes.
-  const Eigen::Matrix3d sensor = Eigen::Matrix3d::Identity() + Eigen::Matrix3d(p.accel_scale.asDiagonal()) +
-                                 p.accel_cross;
+  const Eigen::Matrix3d sensor = sensor_matrix(p);
   if (!(sensor.determinant() > 0.0)) return "accel_scale and accel_cross make a singular accelerometer";
   // diagnose's bound on tau: beyond it the streams are not one sensor's; the live aligner's ring is sized for it.
   if (std::abs(p.time_offset) > 0.25) return "|time_offset| must be at most 0.25 s";

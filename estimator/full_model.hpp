@@ -42,6 +42,11 @@ struct FullModelParams {
 // Why `p` is unusable (a non-finite value, a negative drag coefficient), or nullopt.
 std::optional<std::string> validate(const FullModelParams& p);
 
+// S = I + diag(accel_scale) + accel_cross: the accelerometer reads m = S f + accel_bias.
+inline Eigen::Matrix3d sensor_matrix(const FullModelParams& p) {
+  return Eigen::Matrix3d::Identity() + Eigen::Matrix3d(p.accel_scale.asDiagonal()) + p.accel_cross;
+}
+
 // The per-sample signals of the model; none depends on the parameters.
 struct FullModelInput {
   Eigen::Vector3d gyro = Eigen::Vector3d::Zero();       // w_imu, rad/s, IMU axes

@@ -13,9 +13,7 @@ LeverArmCompensator::LeverArmCompensator(const FullModelParams& params)
   // Without scale or cross-axis errors keep R_bs itself, so such a model compensates exactly as before.
   accel_to_body_ = imu_to_body_;
   if (params.accel_scale != Eigen::Vector3d::Zero() || params.accel_cross != Eigen::Matrix3d::Zero()) {
-    const Eigen::Matrix3d sensor =
-        Eigen::Matrix3d::Identity() + Eigen::Matrix3d(params.accel_scale.asDiagonal()) + params.accel_cross;
-    accel_to_body_ = imu_to_body_ * sensor.inverse();
+    accel_to_body_ = imu_to_body_ * sensor_matrix(params).inverse();
   }
 }
 
