@@ -85,8 +85,9 @@ void print_correlation(const est::Uncertainty& u) {
 }
 
 // `source`: what the model was fitted on, "session 3 (link 3)" or the flights of a set.
+// `written`: whether PARAMS.json was saved (a refused fit is not, and its summary must not say otherwise).
 void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& result, est::VelocitySource velocity,
-                   const std::string& source, double wall_seconds) {
+                   const std::string& source, double wall_seconds, bool written) {
   const est::Identification& id = result.params.identification;
   std::fprintf(stderr, "identified the %s model by %s from %s, velocity %s\n", o.model.c_str(), id.method.c_str(),
                source.c_str(), std::string(est::name(velocity)).c_str());
@@ -124,7 +125,10 @@ void print_summary(const IdentifyCliOptions& o, const est::IdentifyResult& resul
   }
   if (id.process_noise > 0.0)
     std::fprintf(stderr, "the filter's process noise, fitted with the model: %.4g m/s^2/sqrt(Hz)\n", id.process_noise);
-  std::fprintf(stderr, "wall time %.3f s; wrote %s\n", wall_seconds, o.out.c_str());
+  if (written)
+    std::fprintf(stderr, "wall time %.3f s; wrote %s\n", wall_seconds, o.out.c_str());
+  else
+    std::fprintf(stderr, "wall time %.3f s\n", wall_seconds);
 }
 
 // The GA's convergence curves (the paper's Fig. 12): one row per generation, one column per fitted group.
@@ -279,7 +283,7 @@ int run_over_flights(const IdentifyCliOptions& o, const std::vector<std::int64_t
   }
 
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  print_summary(o, result, options.velocity, describe_sessions(flights), wall);
+  print_summary(o, result, options.velocity, describe_sessions(flights), wall, implausible.empty());
   print_flight_map(stderr, flights, joined);
   if (checked.bias_held) std::printf("warning: %s\n", checked.bias_held->c_str());
   const int status = write_or_refuse(o, result, implausible);
@@ -319,7 +323,8 @@ int run(const IdentifyCliOptions& o) {
   std::fprintf(stderr, "%s\n", session.axes.description.c_str());
   print_reference_delay(session);  // with the summary: an error before it stays one line
   print_summary(o, result, options.velocity,
-                "session " + std::to_string(session_id) + " (link " + std::to_string(session.link_id) + ")", wall);
+                "session " + std::to_string(session_id) + " (link " + std::to_string(session.link_id) + ")", wall,
+                implausible.empty());
   if (options.velocity == est::VelocitySource::eq12) {
     if (const auto drift = est::eq12_drift_warning(session.series, result.params.full.mounting,
                                                    result.params.identification.fit_windows.front()))

@@ -250,6 +250,9 @@ TEST_F(IdentifyCommand, ABiasBeyondThePlausibilityTableIsHeldAtZeroAndTheCalibra
   EXPECT_EQ(lever.exit_code, 1) << lever.out << lever.err;
   EXPECT_NE(lever.out.find("refused: implausible: lever arm"), std::string::npos) << lever.out;
   EXPECT_FALSE(fs::exists(out("lever-refused.json")));
+  // Its summary says so and nowhere claims the file was written.
+  EXPECT_NE(lever.err.find("lever-refused.json is not written"), std::string::npos) << lever.err;
+  EXPECT_EQ(lever.err.find("wrote"), std::string::npos) << lever.err;
 }
 
 TEST_F(IdentifyCommand, FitsOneCalibrationOverSeveralFlightsAndValidatesItOnOthers) {
