@@ -70,6 +70,9 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
 // Why the parameters [first, end) of a fit are not determined by the data, or nullopt: a standard error that cannot
 // be computed, or standard errors as large as the values themselves (the data cannot tell the effect from none).
 std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
+  // An effect with no parameters of its own (the measured thrust in place of g, a self-consistent velocity) has
+  // nothing the data must determine: the other rules judge it. Norms of nothing, 0 against 0, would refuse it.
+  if (first >= fit.values.size()) return std::nullopt;
   double value_norm = 0.0, error_norm = 0.0;
   for (std::size_t i = first; i < fit.values.size(); ++i) {
     const double se = fit.std_errors.empty() ? std::numeric_limits<double>::quiet_NaN() : fit.std_errors[i];
@@ -118,7 +121,7 @@ std::vector<bool> flying_best(const std::vector<CandidateTrial>& trials, bool ju
   std::vector<bool> out(trials.size());
   for (std::size_t i = 0; i < trials.size(); ++i) {
     const std::optional<double> f = score(trials[i]);
-    out[i] = trials[i].significant && (!options.judge_by_flight || !best || !f || flies_no_worse(*f, *best, options));
+    out[i] = trials[i].significant && (!options.choose_by_flight || !best || !f || flies_no_worse(*f, *best, options));
   }
   return out;
 }
@@ -586,7 +589,7 @@ std::optional<std::string> refused_fit(const StepContext& step, const Model& mod
     for (std::size_t i = 1; i < implausible.size(); ++i) why += "; " + implausible[i].message;
     return why;
   }
-  return search.options.judge_by_flight ? undetermined(model, best, offset) : std::nullopt;
+  return search.options.flight_rules ? undetermined(model, best, offset) : std::nullopt;
 }
 
 // The fitted candidate as a model: judged (flown as the current model when the live estimator does not run its
@@ -706,7 +709,7 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
     const std::optional<double> score =
         flight_score(t.velocity_validation, t.likelihood_validation, search.judged_by_velocity);
     const bool no_worse_flown =
-        !options.judge_by_flight || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
+        !options.flight_rules || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
     t.significant = improves && passes_f_test && no_worse_flown;
     char why[260];
     t.rejected_by.clear();

@@ -57,8 +57,10 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
   }
 }
 
-FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParams& params, const Windows& windows) {
+std::optional<FilterLikelihood> filter_log_likelihood(const ImuSeries& series, const ModelParams& params,
+                                                      const Windows& windows) {
   DragVelocityEstimator estimator(params.full, config_for(params));
+  if (!estimator.has_drag(0) || !estimator.has_drag(1)) return std::nullopt;
   const TimeWindow* both[] = {&windows.train, &windows.validate};
   double sums[2] = {0.0, 0.0};
   std::size_t counts[2] = {0, 0};
@@ -76,7 +78,7 @@ FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParam
     }
   }
   if (counts[0] == 0 || counts[1] == 0) throw std::invalid_argument("the filter gave no estimate inside a window");
-  return {sums[0] / static_cast<double>(counts[0]), sums[1] / static_cast<double>(counts[1])};
+  return FilterLikelihood{sums[0] / static_cast<double>(counts[0]), sums[1] / static_cast<double>(counts[1])};
 }
 
 namespace {

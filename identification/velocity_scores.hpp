@@ -33,8 +33,11 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
 struct FilterLikelihood {
   double train = 0.0, validation = 0.0;  // per measurement, nats
 };
-// Throws std::invalid_argument for parameters the estimator refuses or a window without estimates.
-FilterLikelihood filter_log_likelihood(const ImuSeries& series, const ModelParams& params, const Windows& windows);
+// Nothing when the model has no drag on a horizontal axis: the filter then reads no velocity from that accelerometer,
+// and its likelihood would rank models that all fly zero velocity (as score_velocity gives none). Throws
+// std::invalid_argument for parameters the estimator refuses or a window without estimates.
+std::optional<FilterLikelihood> filter_log_likelihood(const ImuSeries& series, const ModelParams& params,
+                                                      const Windows& windows);
 
 // "Not moving": the reference's own RMS horizontal speed on each window, in the body frame `mounting` defines.
 VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector3d& mounting, const Windows& windows);

@@ -51,6 +51,7 @@ struct DiagnoseCliOptions {
   std::optional<std::string> out;
   int max_steps = 8;
   bool judge_by_flight = false;
+  bool residual_only = false;
   double lowpass_hz = 0.0;
 };
 
@@ -238,7 +239,10 @@ dg::DiagnoseOptions search_options(const DiagnoseCliOptions& o) {
   for (const std::string& band : o.ignore_bands) options.ignore_bands.push_back(parse_band(band));
   if (o.max_steps < 0) throw std::invalid_argument("--max-steps must be 0 or more");
   options.max_steps = o.max_steps;
-  options.judge_by_flight = o.judge_by_flight;
+  if (o.judge_by_flight && o.residual_only)
+    throw std::invalid_argument("--judge-by-flight and --residual-only contradict each other: give one");
+  options.choose_by_flight = o.judge_by_flight;
+  options.flight_rules = !o.residual_only;
   if (o.lowpass_hz < 0.0) throw std::invalid_argument("--lowpass must be a positive frequency in Hz (0: off)");
   options.lowpass_hz = o.lowpass_hz;
   return options;
@@ -367,9 +371,12 @@ const RegisterCommand kDiagnose([](CLI::App& app) -> CommandRunner {
   cmd->add_option("--ignore-band", o->ignore_bands, "F0:F1 in Hz the frequency search ignores, repeatable");
   cmd->add_option("--max-steps", o->max_steps, "Effects added at most")->capture_default_str();
   cmd->add_flag("--judge-by-flight", o->judge_by_flight,
-                "Keep a step only if it does not fly worse: the validation velocity (reference) or the filter's "
-                "likelihood (IMU alone); of the candidates that pass, take one that flies best; refuse undetermined "
-                "candidates (docs/effects.md)");
+                "Of the candidates that pass every rule, take one that flies best (validation velocity with the "
+                "reference, the filter's likelihood from the IMU alone) instead of the lowest residual. Without it a "
+                "step is still refused when it flies worse or its parameters are undetermined (docs/effects.md)");
+  cmd->add_flag("--residual-only", o->residual_only,
+                "Judge steps by the specific-force residual alone, as the paper does: no velocity or likelihood "
+                "rule, no refusal of undetermined parameters. For comparison; a step it keeps may fly worse");
   cmd->add_option("--lowpass", o->lowpass_hz,
                   "Compare model and measurement below this frequency only, Hz (0: off); for airframes whose "
                   "vibration swamps the accelerometers")

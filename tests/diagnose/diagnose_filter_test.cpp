@@ -18,6 +18,7 @@
 #include "diagnose/search.hpp"
 #include "diagnose/signals.hpp"
 #include "sim/imu_series.hpp"
+#include "tests/support/diagnosis_text.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"
 
@@ -62,7 +63,8 @@ double excess(double rmse, double floor) { return std::sqrt(std::max(rmse * rmse
 // `effect` first, and the excess over `control`'s final error at least halved.
 void expect_found_first(const Diagnosis& d, const Diagnosis& control, const std::string& effect) {
   ASSERT_EQ(d.velocity_source, "filter");
-  ASSERT_FALSE(d.steps.empty()) << "nothing added; base validation RMSE " << d.base.rmse_validation;
+  ASSERT_FALSE(d.steps.empty()) << "nothing added; base validation RMSE " << d.base.rmse_validation
+                                << test::last_candidates(d);
   EXPECT_EQ(d.steps.front().effect, effect);
   const double floor = control.final.rmse_validation;
   EXPECT_LE(excess(d.final.rmse_validation, floor), 0.5 * excess(d.base.rmse_validation, floor))
