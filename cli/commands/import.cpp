@@ -11,10 +11,10 @@
 #include "cli/import_progress_line.hpp"
 #include "cli/new_store.hpp"
 #include "daemon/config.hpp"
-#include "replay/dataflash_import.hpp"
-#include "replay/euroc_import.hpp"
-#include "replay/tlog_import.hpp"
-#include "replay/ulog_import.hpp"
+#include "importers/dataflash_import.hpp"
+#include "importers/euroc_import.hpp"
+#include "importers/tlog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 namespace imubridge::cli {
 namespace {
@@ -22,18 +22,18 @@ namespace {
 struct ImportCommandOptions {
   std::string format, dir, reference, reference_format = "tum";
   std::string db = daemon::StoreConfig{}.path.string();
-  double accel_lsb = replay::EurocImportOptions{}.accel_lsb;
-  double gyro_lsb = replay::EurocImportOptions{}.gyro_lsb;
+  double accel_lsb = importers::EurocImportOptions{}.accel_lsb;
+  double gyro_lsb = importers::EurocImportOptions{}.gyro_lsb;
   std::string imu_axes = "auto";
   std::string imu_message;
   bool no_reference = false;
   int imu = -1;  // dataflash: the IMU instance; -1: the default
-  double gap_threshold_s = replay::kDefaultGapThresholdS;
+  double gap_threshold_s = importers::kDefaultGapThresholdS;
   // Whether the user gave these: ulog has its own defaults for what was not given.
   bool imu_axes_given = false, accel_lsb_given = false, gyro_lsb_given = false;
 };
 
-void print_lines(const char* what, const replay::ImportedFile& file, const replay::LinesByReason& lines) {
+void print_lines(const char* what, const importers::ImportedFile& file, const replay::LinesByReason& lines) {
   if (lines.count() == 0) return;
   std::fprintf(stderr, "%s %llu %s of %s:\n", what, static_cast<unsigned long long>(lines.count()),
                lines.count() == 1 ? "row" : "rows", file.path.c_str());
@@ -78,7 +78,7 @@ void print_axes(const estimator::AxesResolution& axes) {
 
 // The first lines of an on-board log's import (ulog, dataflash): the session, the axes, the IMU records skipped and
 // the samples clipped.
-void print_imu_log(const ImportCommandOptions& o, const replay::ImuLogImportResult& r) {
+void print_imu_log(const ImportCommandOptions& o, const importers::ImuLogImportResult& r) {
   print_imported_log(o, r);
   print_axes(r.axes);
   for (const auto& [reason, count] : r.skipped) {
@@ -92,12 +92,12 @@ void print_imu_log(const ImportCommandOptions& o, const replay::ImuLogImportResu
 }
 
 // The holes in the IMU's data, every import's: how many, how long, the longest's span.
-void print_gaps(const replay::Gaps& gaps) {
+void print_gaps(const importers::Gaps& gaps) {
   if (gaps.holes.empty()) {
     std::fprintf(stderr, "gaps: none (the IMU never stops for over %g s)\n", gaps.threshold_s);
     return;
   }
-  const auto longest = std::ranges::max_element(gaps.holes, {}, &replay::Gap::seconds);
+  const auto longest = std::ranges::max_element(gaps.holes, {}, &importers::Gap::seconds);
   std::fprintf(stderr,
                "warning: %zu %s without IMU samples over %g s (%.1f s in all; the longest %.1f s, %.1f-%.1f s)\n",
                gaps.holes.size(), gaps.holes.size() == 1 ? "gap" : "gaps", gaps.threshold_s, gaps.seconds(),
@@ -126,7 +126,7 @@ void print_reference_skipped(const std::map<std::string, std::uint64_t>& skipped
 }
 
 // When the vehicle flew, by PX4's land detector, in seconds from the first sample.
-void print_airborne(const replay::UlogImportResult& r) {
+void print_airborne(const importers::UlogImportResult& r) {
   if (!r.airborne) {
     std::fprintf(stderr, "airborne: unknown (no vehicle_land_detected record in the log)\n");
     return;
@@ -153,9 +153,9 @@ int run_import_ulog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a ULog file holds its own");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash");
-  replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
+  importers::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
-  const auto r = import_with_progress(o, options, replay::import_ulog);
+  const auto r = import_with_progress(o, options, importers::import_ulog);
   print_imu_log(o, r);
   print_reference(o, r.reference_rows, "vehicle_local_position, attitude from vehicle_attitude",
                   "vehicle_attitude + vehicle_local_position");
@@ -174,11 +174,11 @@ int run_import_ulog(const ImportCommandOptions& o) {
 int run_import_dataflash(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a DataFlash log holds its own");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
-  replay::DataflashImportOptions options{
+  importers::DataflashImportOptions options{
       .file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
   if (o.imu >= 0) options.imu = static_cast<unsigned>(o.imu);
-  const auto r = import_with_progress(o, options, replay::import_dataflash);
+  const auto r = import_with_progress(o, options, importers::import_dataflash);
   print_imu_log(o, r);
   std::string imus;
   for (const auto& [i, text] : r.imus) imus += (imus.empty() ? "" : "; ") + std::to_string(i) + ": " + text;
@@ -197,10 +197,10 @@ int run_import_dataflash(const ImportCommandOptions& o) {
 int run_import_tlog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a tlog holds its own");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash (tlog: --imu-message)");
-  replay::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
+  importers::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
   if (!o.imu_message.empty()) options.imu_message = o.imu_message;
-  const auto r = import_with_progress(o, options, replay::import_tlog);
+  const auto r = import_with_progress(o, options, importers::import_tlog);
   print_imported_log(o, r);
   std::fprintf(stderr, "%llu records, every frame kept as received%s\n", static_cast<unsigned long long>(r.records),
                r.unverified_summary
@@ -219,7 +219,7 @@ int run_import_tlog(const ImportCommandOptions& o) {
   print_reference_skipped(r.reference_skipped);
   std::fprintf(stderr, "events: %llu STATUSTEXT messages, %llu gaps in the log's time over %g s (%.1f s)%s\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.log_gaps),
-               static_cast<double>(replay::kTlogGapUs) * 1e-6, r.log_gap_s,
+               static_cast<double>(importers::kTlogGapUs) * 1e-6, r.log_gap_s,
                r.time_back > 0 ? (", its time stepped back " + std::to_string(r.time_back) + "x").c_str() : "");
   print_gaps(r.gaps);
   print_damage(o, r.damage, "every valid record is imported");
@@ -234,13 +234,13 @@ int run_import(const ImportCommandOptions& o) {
   if (o.no_reference) throw std::invalid_argument("--no-reference is for ulog, tlog and dataflash");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash");
-  replay::EurocImportOptions options{.dir = o.dir,
+  importers::EurocImportOptions options{.dir = o.dir,
                                      .accel_lsb = o.accel_lsb,
                                      .gyro_lsb = o.gyro_lsb,
                                      .imu_axes = o.imu_axes,
                                      .gap_threshold_s = o.gap_threshold_s};
-  if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
-  const auto r = import_with_progress(o, options, replay::import_euroc);  // the bytes of its mav0/imu0/data.csv
+  if (!o.reference.empty()) options.reference = {o.reference, importers::parse_reference_format(o.reference_format)};
+  const auto r = import_with_progress(o, options, importers::import_euroc);  // the bytes of its mav0/imu0/data.csv
   std::fprintf(stderr, "imported %llu IMU rows of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.imu.rows), r.imu.path.c_str(), o.db.c_str(),
                static_cast<long long>(r.session));

@@ -168,7 +168,7 @@ TEST(TlogCli, GarbageIsRefusedInOneLine) {
   EXPECT_NE(wrong.err.find("--protocol mavlink"), std::string::npos) << wrong.err;
 }
 
-// `import dataflash` reads ArduPilot logs (tests/replay/dataflash_import_test.cpp); what is none is refused in one line.
+// `import dataflash` reads ArduPilot logs (tests/importers/dataflash_import_test.cpp); what is none is refused in one line.
 TEST(TlogCli, WhatIsNoDataflashLogIsRefusedInOneLine) {
   TempDir dir;
   const std::string path = (dir / "00000001.BIN").string();

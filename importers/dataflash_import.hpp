@@ -1,6 +1,6 @@
 #pragma once
 // `imubridge import dataflash`: an ArduPilot DataFlash log (.bin) as a session of kind "import", as `import ulog` does
-// it (replay/log_import.hpp): one IMU instance's samples (IMU, or ACC with GYR where they are logged faster)
+// it (importers/log_import.hpp): one IMU instance's samples (IMU, or ACC with GYR where they are logged faster)
 // re-encoded as imubridge frames and recorded through the session engine, the EKF's position, velocity and attitude
 // as the reference trajectory, MSG, MODE and arming as events, the parameters in the session's config.
 // docs/replay.md, "ArduPilot DataFlash".
@@ -10,11 +10,11 @@
 #include <optional>
 #include <string>
 
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct DataflashImportOptions {
   std::filesystem::path file;
@@ -45,4 +45,4 @@ struct DataflashImportResult : ImuLogImportResult {
 // invalid.
 DataflashImportResult import_dataflash(store::Store& store, const DataflashImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

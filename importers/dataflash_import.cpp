@@ -1,4 +1,4 @@
-#include "replay/dataflash_import.hpp"
+#include "importers/dataflash_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,9 +11,9 @@
 #include <utility>
 #include <vector>
 
-#include "replay/dataflash.hpp"
+#include "importers/dataflash.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 constexpr double kRadiansPerDegree = M_PI / 180;
@@ -332,4 +332,4 @@ DataflashImportResult import_dataflash(store::Store& store, const DataflashImpor
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
+#include "importers/import_progress.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 // The IMU stopping for longer than this is a hole in the data: a `gap` event. 0.5 s is 25 periods of the slowest IMU
 // logs seen (ArduPilot's 50 Hz), far above any logger's write stall (PX4 reports those as dropouts of tens of ms), and
@@ -179,4 +179,4 @@ struct ImuLogImportResult {
 // Both receive clocks are the log's time in ns, the device clock the log's µs. Fills `result` (its own fields only).
 void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,4 +1,4 @@
-#include "replay/ulog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,10 +11,10 @@
 #include <utility>
 #include <vector>
 
-#include "replay/log_import.hpp"
-#include "replay/ulog.hpp"
+#include "importers/log_import.hpp"
+#include "importers/ulog.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 // PX4 marks a relative timestamp whose sensor had no new sample with INT32_MAX.
@@ -237,4 +237,4 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,4 +1,4 @@
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -12,14 +12,14 @@
 #include <stdexcept>
 #include <utility>
 
+#include "importers/log_import.hpp"
+#include "importers/position_derivative.hpp"
 #include "pipeline/record_and_decode.hpp"
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/imu_frame.hpp"
-#include "replay/log_import.hpp"
-#include "replay/position_derivative.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -53,12 +53,12 @@ std::optional<std::array<double, 4>> ned_attitude(double w, double x, double y, 
 std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, ImportedFile& report) {
   std::ifstream in = open_input(file.path);
   const bool tum = file.format == ReferenceFormat::tum;
-  const TableLayout layout =
-      tum ? TableLayout{' ', 9, 8, 8} : TableLayout{',', 0, 11, std::numeric_limits<std::size_t>::max()};
+  const replay::TableLayout layout = tum ? replay::TableLayout{' ', 9, 8, 8}
+                                         : replay::TableLayout{',', 0, 11, std::numeric_limits<std::size_t>::max()};
   std::vector<store::ReferenceRow> rows;
-  read_table(
+  replay::read_table(
       in, layout,
-      [&](const TableRow& row) -> std::optional<std::string> {
+      [&](const replay::TableRow& row) -> std::optional<std::string> {
         const auto& v = row.values;
         const auto q = tum ? ned_attitude(v[6], v[3], v[4], v[5]) : ned_attitude(v[3], v[4], v[5], v[6]);
         if (!q) return "quaternion not of unit length";
@@ -92,14 +92,14 @@ std::string range_text(double lsb, const char* unit) {
 }
 
 void record_lines(store::Store& store, std::int64_t session, std::optional<std::int64_t> link, std::int64_t t_ns,
-                  const char* kind, const fs::path& file, const LinesByReason& lines) {
+                  const char* kind, const fs::path& file, const replay::LinesByReason& lines) {
   for (const auto& [reason, at] : lines.lines) {
     store.append_event(session, {.link_id = link,
                                  .mono_ns = t_ns,
                                  .wall_ns = t_ns,
                                  .kind = kind,
                                  .count = static_cast<std::int64_t>(at.size()),
-                                 .detail = file.string() + ": " + LinesByReason::describe(reason, at)});
+                                 .detail = file.string() + ": " + replay::LinesByReason::describe(reason, at)});
   }
 }
 
@@ -140,13 +140,13 @@ class ImuRecording {
         accel_beyond_("accel " + range_text(options.accel_lsb, "m/s^2")),
         gyro_beyond_("gyro " + range_text(options.gyro_lsb, "rad/s")) {}
 
-  void add(const TableRow& row) {
+  void add(const replay::TableRow& row) {
     if (!recording_) begin(row.t_ns);
     const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
     const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
     if (beyond_frame_range(accel, options_.accel_lsb)) result_.clipped.add(row.line, accel_beyond_);
     if (beyond_frame_range(gyro, options_.gyro_lsb)) result_.clipped.add(row.line, gyro_beyond_);
-    const std::uint64_t since_t0 = elapsed_ns(t0_, row.t_ns);
+    const std::uint64_t since_t0 = replay::elapsed_ns(t0_, row.t_ns);
     bytes_.clear();
     protocol::imu::encode({.seq = static_cast<std::uint16_t>(result_.imu.rows),
                            .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
@@ -255,9 +255,9 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
 
   ImuRecording recording(store, options, calibration, session_config(options, reference, result.velocity_derived),
                          result);
-  read_table(
+  replay::read_table(
       imu, {',', 0, 7, 7},
-      [&](const TableRow& row) -> std::optional<std::string> {
+      [&](const replay::TableRow& row) -> std::optional<std::string> {
         recording.add(row);
         if (options.progress && result.imu.rows % kImportProgressEvery == 0 && !imu.eof()) {
           report_progress(imu, imu_size, result.imu.rows, options.progress);
@@ -286,4 +286,4 @@ EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& op
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

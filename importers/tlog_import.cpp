@@ -1,4 +1,4 @@
-#include "replay/tlog_import.hpp"
+#include "importers/tlog_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -22,10 +22,10 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/mavlink.hpp"
-#include "replay/euroc_import.hpp"
-#include "replay/tlog.hpp"
+#include "importers/euroc_import.hpp"
+#include "importers/tlog.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace mavlink = protocol::mavlink;
@@ -464,4 +464,4 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -2,7 +2,7 @@
 // a newer one timed in µs with FMTU, UNIT and MULT, IMU instances by name and by I field, ACC and GYR faster than
 // IMU), damage (a truncated record, a corrupt header byte, a type no FMT defines), the import's samples, reference,
 // events, parameters and holes, and the real ArduCopter flight log171.bin from ../shared/data/dataflash when present.
-#include "replay/dataflash_import.hpp"
+#include "importers/dataflash_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,12 +14,12 @@
 #include <nlohmann/json.hpp>
 #include <variant>
 
-#include "replay/dataflash.hpp"
-#include "replay/log_import.hpp"
+#include "importers/dataflash.hpp"
+#include "importers/log_import.hpp"
 #include "tests/support/stored_rows.hpp"
 #include "tests/support/temp_dir.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -203,7 +203,7 @@ class DataflashImport : public ::testing::Test {
   }
 };
 
-// The holes every log importer records (replay/log_import.hpp): over the threshold only, between any two times a log
+// The holes every log importer records (importers/log_import.hpp): over the threshold only, between any two times a log
 // may hold (euroc_fuzz found 2^63-1 after -5 overflowing the difference).
 TEST(LogImportGaps, FindsTheHolesOverTheThresholdBetweenAnyTimes) {
   const std::vector<std::int64_t> t{0, 100'000'000, 1'200'000'000, 1'300'000'000};
@@ -552,4 +552,4 @@ TEST_F(DataflashImport, TheArduCopterFlightLog171) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -11,11 +11,11 @@
 #include <string>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct TlogImportOptions {
   std::filesystem::path file;
@@ -62,4 +62,4 @@ inline constexpr std::uint64_t kTlogGapUs = 2'000'000;
 // as a tlog, holds no IMU message that gives samples, or the options are invalid.
 TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

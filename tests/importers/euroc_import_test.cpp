@@ -1,6 +1,6 @@
 // EuRoC import: messy rows skipped and counted by line and reason, the frames' calibration and clock, the
 // reference's conventions (NED, body -> NED), the velocity differentiator, and the real MH_01_easy flight.
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,13 +13,20 @@
 #include <numeric>
 #include <sstream>
 
-#include "replay/position_derivative.hpp"
+#include "importers/position_derivative.hpp"
 #include "replay/text_table.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
+// The text tables the importer reads its files with (replay/text_table.hpp), tested here with the files they read.
+using replay::format_ranges;
+using replay::LinesByReason;
+using replay::parse_scaled_integer;
+using replay::read_table;
+using replay::TableLayout;
+using replay::TableRow;
 
 const fs::path kFixture = fs::path(IMUBRIDGE_SOURCE_DIR) / "tests/data/euroc_junk";
 constexpr std::int64_t kT0 = 1403636579758560000;  // the fixture's first IMU stamp, ns
@@ -331,4 +338,4 @@ TEST_F(EurocImport, RealMh01EasyFlight) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

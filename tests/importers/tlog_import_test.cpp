@@ -1,7 +1,7 @@
 // MAVLink telemetry logs: the reader on logs built here from a simulated flight with the project's own MAVLink
 // encoder (sim::MavlinkTelemetry), damaged and garbage files, and the import's samples, IMU choice, reference and
 // events against the simulator's truth.
-#include "replay/tlog_import.hpp"
+#include "importers/tlog_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -11,15 +11,15 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "importers/tlog.hpp"
 #include "protocol/mavlink.hpp"
 #include "replay/replayer.hpp"
-#include "replay/tlog.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 #include "tests/support/stored_rows.hpp"
 #include "tests/support/temp_dir.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -267,7 +267,7 @@ TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
   EXPECT_EQ(c.at("links")[0].at("mavlink_imu").at("message"), "HIGHRES_IMU");
 
   // The stored chunks are the frames: replay decodes them as the import did.
-  const ReplayResult replayed = replay_session(store, r.session, {});
+  const replay::ReplayResult replayed = replay::replay_session(store, r.session, {});
   EXPECT_EQ(replayed.samples, f.samples.size());
 }
 
@@ -288,7 +288,8 @@ TEST_F(TlogImport, TheImuWithTheMostMessagesIsImportedAndTheOthersNamed) {
   EXPECT_EQ(r.skipped.at("SCALED_IMU3 from system 1, component 1: not the IMU imported"), n3);
   EXPECT_EQ(stored_events(store, r.session, "import_skipped").size(), 2u);
   EXPECT_EQ(stored_samples(store, r.session).size(), n);
-  EXPECT_EQ(replay_session(store, r.session, {}).samples, n);  // not n + n2 + n3: the others stay out on replay too
+  EXPECT_EQ(replay::replay_session(store, r.session, {}).samples,
+            n);  // not n + n2 + n3: the others stay out on replay too
 
   const auto second = import_tlog(store, {.file = write(f.tlog), .imu_message = "SCALED_IMU2"});
   EXPECT_EQ(second.imu_source, "SCALED_IMU2 from system 1, component 1");
@@ -302,7 +303,7 @@ TEST_F(TlogImport, TheImuWithTheMostMessagesIsImportedAndTheOthersNamed) {
       EXPECT_NEAR(s[k].gyro[a], want.measured.gyro[a], 0.5e-3 + 1e-12) << k;
     }
   }
-  EXPECT_EQ(replay_session(store, second.session, {}).samples, n2);
+  EXPECT_EQ(replay::replay_session(store, second.session, {}).samples, n2);
 }
 
 TEST_F(TlogImport, RawImuOnlyWithItsResolutions) {
@@ -433,4 +434,4 @@ TEST_F(TlogImport, NoReferenceWhenAskedAndAxesAsDeclared) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -9,13 +9,13 @@
 #include <string_view>
 
 #include "estimator/imu_axes.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "protocol/calibration.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
 #include "replay/text_table.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 enum class ReferenceFormat {
   tum,       // "t x y z qx qy qz qw", t in seconds, space separated: positions only
@@ -47,7 +47,7 @@ struct EurocImportOptions {
 struct ImportedFile {
   std::filesystem::path path;
   std::uint64_t rows = 0;  // rows imported
-  LinesByReason skipped{};
+  replay::LinesByReason skipped{};
 };
 
 struct EurocImportResult {
@@ -55,7 +55,7 @@ struct EurocImportResult {
   ImportedFile imu;
   std::optional<ImportedFile> reference;
   bool velocity_derived = false;   // the reference had positions only: velocity_from_positions() supplied it
-  LinesByReason clipped;           // IMU rows imported with a value clipped to the frame's range
+  replay::LinesByReason clipped;   // IMU rows imported with a value clipped to the frame's range
   estimator::AxesResolution axes;  // the declared axes checked against gravity in the imported rows
   Gaps gaps;                       // holes in the IMU's data
 };
@@ -70,4 +70,4 @@ protocol::Calibration import_calibration(double accel_lsb, double gyro_lsb);
 // writing anything, when a file is missing or has no usable row, or the IMU axes do not parse.
 EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

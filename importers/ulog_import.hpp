@@ -11,11 +11,11 @@
 #include <vector>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct UlogImportOptions {
   std::filesystem::path file;
@@ -49,4 +49,4 @@ struct UlogImportResult : ImuLogImportResult {
 // as a ULog, has no IMU topic with a usable record, or the options are invalid.
 UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

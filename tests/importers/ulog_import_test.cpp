@@ -1,7 +1,7 @@
 // PX4 ULog: the reader on a file built here message by message (nested formats, padding, every message type,
 // appended data, truncation and corrupt definitions), the import's samples, reference and events, and the PX4
 // sample logs of pyulog (tests/data/ulog, and sample.ulg from ../shared/data/ulog when present).
-#include "replay/ulog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -13,10 +13,10 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "replay/ulog.hpp"
+#include "importers/ulog.hpp"
 #include "tests/support/stored_rows.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -471,4 +471,4 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

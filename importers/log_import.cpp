@@ -1,4 +1,4 @@
-#include "replay/log_import.hpp"
+#include "importers/log_import.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -15,9 +15,9 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/imu_frame.hpp"
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 std::int64_t ns(std::uint64_t us) { return static_cast<std::int64_t>(us) * 1000; }
@@ -272,4 +272,4 @@ void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& setti
   pipeline::end_recorded_session(store, result.session, events.end);
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers
