@@ -1,4 +1,4 @@
-// Import throughput: `imubridge import ulog` and `import tlog` as replay::import_ulog / import_tlog run them, each
+// Import throughput: `imubridge import ulog` and `import tlog` as importers::import_ulog / import_tlog run them, each
 // iteration into a fresh SQLite store in a scratch directory, in IMU samples per second of CPU time (Google
 // Benchmark's CPU column). Target: >= 1,000,000 samples/s for both. The *Read benchmarks run the file's reader alone
 // (and for tlog, the reader plus one MAVLink decoder pass over every frame, what the import's survey of the log
@@ -18,14 +18,14 @@
 
 #include "bench/scratch_dir.hpp"
 #include "protocol/mavlink.hpp"
-#include "replay/tlog.hpp"
-#include "replay/tlog_import.hpp"
-#include "replay/ulog.hpp"
-#include "replay/ulog_import.hpp"
+#include "importers/tlog.hpp"
+#include "importers/tlog_import.hpp"
+#include "importers/ulog.hpp"
+#include "importers/ulog_import.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -160,4 +160,4 @@ void BM_TlogReadAndDecode(benchmark::State& state) {
 BENCHMARK(BM_TlogReadAndDecode)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -18,7 +18,7 @@
 #include "identification/flight_span.hpp"
 #include "identification/identify.hpp"
 #include "pipeline/session_series.hpp"
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 #include "scratch_dir.hpp"
 #include "store/store.hpp"
 
@@ -44,10 +44,10 @@ const std::optional<RealFlight>& real_flight() {
     const std::filesystem::path dir = euroc_dir();
     if (!std::filesystem::exists(dir / "mav0" / "imu0" / "data.csv")) return std::nullopt;
     store::Store store(scratch.database());
-    replay::EurocImportOptions options;
+    importers::EurocImportOptions options;
     options.dir = dir;
-    options.reference = replay::ReferenceFile{dir / "MH_01_easy.txt", replay::ReferenceFormat::tum};
-    const auto imported = replay::import_euroc(store, options);
+    options.reference = importers::ReferenceFile{dir / "MH_01_easy.txt", importers::ReferenceFormat::tum};
+    const auto imported = importers::import_euroc(store, options);
     RealFlight out;
     out.database = scratch.database();
     out.session = imported.session;

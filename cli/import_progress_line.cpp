@@ -33,12 +33,12 @@ ImportProgressLine::ImportProgressLine(std::string file_name, std::FILE* out, bo
 
 ImportProgressLine::~ImportProgressLine() { finish(); }
 
-replay::ImportProgressCallback ImportProgressLine::callback() {
+importers::ImportProgressCallback ImportProgressLine::callback() {
   if (!shown_) return {};
-  return [this](const replay::ImportProgress& p) { update(p); };
+  return [this](const importers::ImportProgress& p) { update(p); };
 }
 
-void ImportProgressLine::update(const replay::ImportProgress& progress) {
+void ImportProgressLine::update(const importers::ImportProgress& progress) {
   if (!shown_ || finished_) return;
   last_ = progress;
   reported_ = true;
@@ -62,7 +62,7 @@ void ImportProgressLine::draw() {
   std::fflush(out_);
 }
 
-std::string ImportProgressLine::format(std::string_view file_name, const replay::ImportProgress& p) {
+std::string ImportProgressLine::format(std::string_view file_name, const importers::ImportProgress& p) {
   const std::uint64_t total = p.bytes_total, read = std::min(p.bytes_read, p.bytes_total);
   const int percent = total == 0 ? 100 : static_cast<int>(read * 100 / total);
   const bool mb = total >= 1'000'000;

@@ -7,7 +7,7 @@
 #include <string>
 #include <string_view>
 
-#include "replay/import_progress.hpp"
+#include "importers/import_progress.hpp"
 
 namespace imubridge::cli {
 
@@ -22,13 +22,13 @@ class ImportProgressLine {
 
   bool shown() const { return shown_; }
   // For an importer's options: empty when the line is not shown, so the importer does no work for it.
-  replay::ImportProgressCallback callback();
-  void update(const replay::ImportProgress& progress);
+  importers::ImportProgressCallback callback();
+  void update(const importers::ImportProgress& progress);
   // Draws the last state and ends the line (once; nothing if nothing was reported).
   void finish();
 
   // "importing sample.ulg  42% 1.7/4.0 MB  12,345 samples" (no samples part while there are none).
-  static std::string format(std::string_view file_name, const replay::ImportProgress& progress);
+  static std::string format(std::string_view file_name, const importers::ImportProgress& progress);
 
  private:
   void draw();
@@ -37,7 +37,7 @@ class ImportProgressLine {
   std::FILE* out_;
   bool shown_;
   bool reported_ = false, finished_ = false;
-  replay::ImportProgress last_{};
+  importers::ImportProgress last_{};
   std::chrono::steady_clock::time_point drawn_at_{};
   bool drawn_ = false;
 };

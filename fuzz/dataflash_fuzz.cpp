@@ -1,4 +1,4 @@
-// libFuzzer target for the ArduPilot DataFlash reader (replay/dataflash.hpp) behind `imubridge import dataflash`.
+// libFuzzer target for the ArduPilot DataFlash reader (importers/dataflash.hpp) behind `imubridge import dataflash`.
 // Input: a DataFlash log. A finding is a crash, a sanitizer report, an exception other than ParseError, or a Log that
 // does not hold together: every message's records fill its data exactly, every field of every record is readable,
 // and damage reads as one line.
@@ -7,9 +7,9 @@
 #include <string>
 
 #include "fuzz/fuzz_require.hpp"
-#include "replay/dataflash.hpp"
+#include "importers/dataflash.hpp"
 
-namespace dataflash = imubridge::replay::dataflash;
+namespace dataflash = imubridge::importers::dataflash;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {

@@ -1,5 +1,5 @@
 #pragma once
-// What fuzz/euroc_fuzz.cpp and fuzz/tum_fuzz.cpp share: `imubridge import euroc` (replay::import_euroc) on a dataset
+// What fuzz/euroc_fuzz.cpp and fuzz/tum_fuzz.cpp share: `imubridge import euroc` (importers::import_euroc) on a dataset
 // written from the fuzzer's input, into a scratch store. The import reads files only, so the input goes to a
 // directory of the process's own that disappears at exit. It either imports or throws std::invalid_argument (a
 // missing file, no usable row) or store::StoreError; any other exception escapes to libFuzzer as a finding.
@@ -12,7 +12,7 @@
 #include <string>
 #include <string_view>
 
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 #include "store/error.hpp"
 #include "store/store.hpp"
 
@@ -25,16 +25,16 @@ class EurocImportHarness {
 
   // Imports `imu_csv` as mav0/imu0/data.csv with `reference`: written where EuRoC keeps its ground truth
   // (the import's default) for ReferenceFormat::euroc_gt, or given as --reference for ReferenceFormat::tum.
-  void import(std::string_view imu_csv, std::optional<std::string_view> reference, replay::ReferenceFormat format) {
+  void import(std::string_view imu_csv, std::optional<std::string_view> reference, importers::ReferenceFormat format) {
     write(imu_csv_, imu_csv);
-    replay::EurocImportOptions options{.dir = dir_};
+    importers::EurocImportOptions options{.dir = dir_};
     std::filesystem::remove(ground_truth_);
-    if (reference && format == replay::ReferenceFormat::euroc_gt) {
+    if (reference && format == importers::ReferenceFormat::euroc_gt) {
       std::filesystem::create_directories(ground_truth_.parent_path());
       write(ground_truth_, *reference);
     } else if (reference) {
       write(tum_, *reference);
-      options.reference = replay::ReferenceFile{tum_, format};
+      options.reference = importers::ReferenceFile{tum_, format};
     }
     // A fresh store each time: one that persisted would grow, and every input that leaves memory allocated sends
     // libFuzzer through a leak check, which takes a hundred times longer than the import.
@@ -43,7 +43,7 @@ class EurocImportHarness {
     std::filesystem::remove(db_.string() + "-shm");
     store::Store store(db_);
     try {
-      replay::import_euroc(store, options);
+      importers::import_euroc(store, options);
     } catch (const std::invalid_argument&) {
     } catch (const store::StoreError&) {
     }

@@ -1,4 +1,4 @@
-// libFuzzer target for the MAVLink telemetry log reader (replay/tlog.hpp) behind `imubridge import tlog`. Input: a
+// libFuzzer target for the MAVLink telemetry log reader (importers/tlog.hpp) behind `imubridge import tlog`. Input: a
 // tlog. A finding is a crash, a sanitizer report, an exception other than ParseError, or a Log that does not account
 // for the file: its records and damaged stretches, in order, must tile every byte of it, each record's frame must pass
 // the MAVLink checks (or be of an id no dialect here knows, or a known id's other layout), and the damage must read as
@@ -11,9 +11,9 @@
 
 #include "fuzz/fuzz_require.hpp"
 #include "protocol/mavlink.hpp"
-#include "replay/tlog.hpp"
+#include "importers/tlog.hpp"
 
-namespace tlog = imubridge::replay::tlog;
+namespace tlog = imubridge::importers::tlog;
 namespace mavlink = imubridge::protocol::mavlink;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -1,5 +1,5 @@
 // libFuzzer target for a TUM reference trajectory ("t x y z qx qy qz qw") read by `imubridge import euroc
-// --reference FILE --reference-format tum` (replay/euroc_import.hpp), velocity derived from its positions included.
+// --reference FILE --reference-format tum` (importers/euroc_import.hpp), velocity derived from its positions included.
 // Input: the TUM file; the dataset's IMU file is a fixed valid one. What counts as a finding:
 // fuzz/euroc_import_harness.hpp.
 #include <cstdint>
@@ -21,6 +21,6 @@ constexpr std::string_view kImuCsv =
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static imubridge::fuzz::EurocImportHarness harness;
   harness.import(kImuCsv, std::string_view(reinterpret_cast<const char*>(data), size),
-                 imubridge::replay::ReferenceFormat::tum);
+                 imubridge::importers::ReferenceFormat::tum);
   return 0;
 }

@@ -2,6 +2,7 @@
 // ArduPilot DataFlash log into a new session, from bytes like a recorded flight, with its reference trajectory.
 // docs/replay.md.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <map>
@@ -11,10 +12,10 @@
 #include "cli/import_progress_line.hpp"
 #include "cli/new_store.hpp"
 #include "daemon/config.hpp"
-#include "replay/dataflash_import.hpp"
-#include "replay/euroc_import.hpp"
-#include "replay/tlog_import.hpp"
-#include "replay/ulog_import.hpp"
+#include "importers/dataflash_import.hpp"
+#include "importers/euroc_import.hpp"
+#include "importers/tlog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 namespace imubridge::cli {
 namespace {
@@ -22,31 +23,62 @@ namespace {
 struct ImportCommandOptions {
   std::string format, dir, reference, reference_format = "tum";
   std::string db = daemon::StoreConfig{}.path.string();
-  double accel_lsb = replay::EurocImportOptions{}.accel_lsb;
-  double gyro_lsb = replay::EurocImportOptions{}.gyro_lsb;
+  double accel_lsb = importers::EurocImportOptions{}.accel_lsb;
+  double gyro_lsb = importers::EurocImportOptions{}.gyro_lsb;
   std::string imu_axes = "auto";
   std::string imu_message;
   bool no_reference = false;
   int imu = -1;  // dataflash: the IMU instance; -1: the default
-  double gap_threshold_s = replay::kDefaultGapThresholdS;
+  double gap_threshold_s = importers::kDefaultGapThresholdS;
   // Whether the user gave these: ulog has its own defaults for what was not given.
   bool imu_axes_given = false, accel_lsb_given = false, gyro_lsb_given = false;
 };
 
-void print_lines(const char* what, const replay::ImportedFile& file, const replay::LinesByReason& lines) {
-  if (lines.count() == 0) return;
-  std::fprintf(stderr, "%s %llu %s of %s:\n", what, static_cast<unsigned long long>(lines.count()),
-               lines.count() == 1 ? "row" : "rows", file.path.c_str());
-  for (const auto& line : lines.summary()) std::fprintf(stderr, "  %s\n", line.c_str());
-}
+// The problems an import reports, printed once, after its summary, the same way for every format: a line each, a
+// warning where values were clipped or the file is damaged. Problems alike but for their place (a tlog's damaged
+// stretches) are one line with their counts summed and the first's place.
+class ProblemLines {
+ public:
+  importers::ProblemCallback callback() {
+    return [this](const importers::ImportProblem& p) { add(p); };
+  }
+  void print() const {
+    for (const auto& [problem, places] : merged_) {
+      importers::ImportProblem shown = problem;
+      if (places > 1 && shown.where) *shown.where += "; the first of " + std::to_string(places);
+      std::fprintf(stderr, "%s%s\n", problem.kind == importers::ProblemKind::skipped ? "" : "warning: ",
+                   importers::describe(shown).c_str());
+    }
+  }
 
-// Runs `import` into the store, showing how far it is on a terminal.
+ private:
+  void add(const importers::ImportProblem& p) {
+    const auto alike = std::ranges::find_if(merged_, [&](const Merged& m) {
+      return m.problem.kind == p.kind && m.problem.what == p.what && m.problem.why == p.why;
+    });
+    if (alike == merged_.end()) {
+      merged_.push_back({p});
+    } else {
+      alike->problem.count += p.count;
+      ++alike->places;
+    }
+  }
+  struct Merged {
+    importers::ImportProblem problem;
+    std::uint64_t places = 1;
+  };
+  std::vector<Merged> merged_;
+};
+
+// Runs `import` into the store, showing how far it is on a terminal and collecting its problems.
 template <typename ImportOptions, typename Import>
-auto import_with_progress(const ImportCommandOptions& o, ImportOptions& options, Import import) {
+auto import_with_progress(const ImportCommandOptions& o, ImportOptions& options, Import import,
+                          ProblemLines& problems) {
   const daemon::NewStoreGuard new_store(o.db);  // no empty store left behind by a failed import
   store::Store store(o.db);
   ImportProgressLine progress(o.dir);
   options.progress = progress.callback();
+  options.on_problem = problems.callback();
   auto r = import(store, options);
   progress.finish();
   return r;
@@ -76,28 +108,19 @@ void print_axes(const estimator::AxesResolution& axes) {
   if (axes.note) std::fprintf(stderr, "note: %s\n", axes.note->c_str());
 }
 
-// The first lines of an on-board log's import (ulog, dataflash): the session, the axes, the IMU records skipped and
-// the samples clipped.
-void print_imu_log(const ImportCommandOptions& o, const replay::ImuLogImportResult& r) {
+// The first lines of an on-board log's import (ulog, dataflash): the session and the axes.
+void print_imu_log(const ImportCommandOptions& o, const importers::ImuLogImportResult& r) {
   print_imported_log(o, r);
   print_axes(r.axes);
-  for (const auto& [reason, count] : r.skipped) {
-    std::fprintf(stderr, "skipped %llu %s records: %s\n", static_cast<unsigned long long>(count), r.imu_source.c_str(),
-                 reason.c_str());
-  }
-  if (r.clipped > 0) {
-    std::fprintf(stderr, "warning: %llu samples beyond the frames' range, clipped\n",
-                 static_cast<unsigned long long>(r.clipped));
-  }
 }
 
 // The holes in the IMU's data, every import's: how many, how long, the longest's span.
-void print_gaps(const replay::Gaps& gaps) {
+void print_gaps(const importers::Gaps& gaps) {
   if (gaps.holes.empty()) {
     std::fprintf(stderr, "gaps: none (the IMU never stops for over %g s)\n", gaps.threshold_s);
     return;
   }
-  const auto longest = std::ranges::max_element(gaps.holes, {}, &replay::Gap::seconds);
+  const auto longest = std::ranges::max_element(gaps.holes, {}, &importers::Gap::seconds);
   std::fprintf(stderr,
                "warning: %zu %s without IMU samples over %g s (%.1f s in all; the longest %.1f s, %.1f-%.1f s)\n",
                gaps.holes.size(), gaps.holes.size() == 1 ? "gap" : "gaps", gaps.threshold_s, gaps.seconds(),
@@ -105,8 +128,11 @@ void print_gaps(const replay::Gaps& gaps) {
                static_cast<double>(longest->to_ns - gaps.session_start_ns) * 1e-9);
 }
 
-void print_damage(const ImportCommandOptions& o, const std::optional<std::string>& damage, const char* kept) {
-  if (damage) std::fprintf(stderr, "warning: %s is damaged: %s; %s\n", o.dir.c_str(), damage->c_str(), kept);
+// The last lines of every import: the holes, the problems, the session's id alone on stdout.
+void print_end(const importers::Gaps& gaps, const ProblemLines& problems, std::int64_t session) {
+  print_gaps(gaps);
+  problems.print();
+  std::printf("%lld\n", static_cast<long long>(session));
 }
 
 void print_reference(const ImportCommandOptions& o, std::uint64_t rows, const std::string& source, const char* none) {
@@ -119,14 +145,8 @@ void print_reference(const ImportCommandOptions& o, std::uint64_t rows, const st
   }
 }
 
-void print_reference_skipped(const std::map<std::string, std::uint64_t>& skipped) {
-  for (const auto& [reason, count] : skipped) {
-    std::fprintf(stderr, "skipped %llu reference rows: %s\n", static_cast<unsigned long long>(count), reason.c_str());
-  }
-}
-
 // When the vehicle flew, by PX4's land detector, in seconds from the first sample.
-void print_airborne(const replay::UlogImportResult& r) {
+void print_airborne(const importers::UlogImportResult& r) {
   if (!r.airborne) {
     std::fprintf(stderr, "airborne: unknown (no vehicle_land_detected record in the log)\n");
     return;
@@ -153,77 +173,65 @@ int run_import_ulog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a ULog file holds its own");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash");
-  replay::UlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
+  importers::UlogImportOptions options{
+      .file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
-  const auto r = import_with_progress(o, options, replay::import_ulog);
+  ProblemLines problems;
+  const auto r = import_with_progress(o, options, importers::import_ulog, problems);
   print_imu_log(o, r);
   print_reference(o, r.reference_rows, "vehicle_local_position, attitude from vehicle_attitude",
                   "vehicle_attitude + vehicle_local_position");
-  print_reference_skipped(r.reference_skipped);
   print_airborne(r);
   std::fprintf(
       stderr, "events: %llu logged strings, %llu dropouts (%llu ms)%s\n", static_cast<unsigned long long>(r.log_events),
       static_cast<unsigned long long>(r.dropouts), static_cast<unsigned long long>(r.dropout_ms),
       r.data_appended ? (", appended data: " + std::to_string(r.appended_messages) + " messages").c_str() : "");
-  print_gaps(r.gaps);
-  print_damage(o, r.damage, "everything before it is imported");
-  std::printf("%lld\n", static_cast<long long>(r.session));
+  print_end(r.gaps, problems, r.session);
   return 0;
 }
 
 int run_import_dataflash(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a DataFlash log holds its own");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
-  replay::DataflashImportOptions options{
+  importers::DataflashImportOptions options{
       .file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
   if (o.imu >= 0) options.imu = static_cast<unsigned>(o.imu);
-  const auto r = import_with_progress(o, options, replay::import_dataflash);
+  ProblemLines problems;
+  const auto r = import_with_progress(o, options, importers::import_dataflash, problems);
   print_imu_log(o, r);
   std::string imus;
   for (const auto& [i, text] : r.imus) imus += (imus.empty() ? "" : "; ") + std::to_string(i) + ": " + text;
   std::fprintf(stderr, "IMU instance %u imported (--imu N picks another); the log's: %s\n", r.instance, imus.c_str());
   print_reference(o, r.reference_rows, r.reference_source, "EKF1, NKF1 or XKF1 (with ATT)");
-  print_reference_skipped(r.reference_skipped);
   std::fprintf(stderr, "events: %llu MSG, %llu MODE changes, %llu arming changes; %llu parameters in the config\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.mode_changes),
                static_cast<unsigned long long>(r.arming_changes), static_cast<unsigned long long>(r.params));
-  print_gaps(r.gaps);
-  print_damage(o, r.damage, "everything before it is imported");
-  std::printf("%lld\n", static_cast<long long>(r.session));
+  print_end(r.gaps, problems, r.session);
   return 0;
 }
 
 int run_import_tlog(const ImportCommandOptions& o) {
   if (!o.reference.empty()) throw std::invalid_argument("--reference is for euroc: a tlog holds its own");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash (tlog: --imu-message)");
-  replay::TlogImportOptions options{.file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
+  importers::TlogImportOptions options{
+      .file = o.dir, .reference = !o.no_reference, .gap_threshold_s = o.gap_threshold_s};
   apply_given(o, options);
   if (!o.imu_message.empty()) options.imu_message = o.imu_message;
-  const auto r = import_with_progress(o, options, replay::import_tlog);
+  ProblemLines problems;
+  const auto r = import_with_progress(o, options, importers::import_tlog, problems);
   print_imported_log(o, r);
   std::fprintf(stderr, "%llu records, every frame kept as received%s\n", static_cast<unsigned long long>(r.records),
                r.unverified_summary
                    ? ("; valid frames nothing here can check, kept unchecked: " + *r.unverified_summary).c_str()
                    : "");
   print_axes(r.axes);
-  for (const auto& [reason, count] : r.skipped) {
-    std::fprintf(stderr, "skipped %llu IMU messages: %s\n", static_cast<unsigned long long>(count), reason.c_str());
-  }
-  if (r.clipped > 0) {
-    std::fprintf(stderr,
-                 "warning: %llu samples with a value at the end of its field's range (clipped by the sender?)\n",
-                 static_cast<unsigned long long>(r.clipped));
-  }
   print_reference(o, r.reference_rows, r.reference_source, "LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE");
-  print_reference_skipped(r.reference_skipped);
   std::fprintf(stderr, "events: %llu STATUSTEXT messages, %llu gaps in the log's time over %g s (%.1f s)%s\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.log_gaps),
-               static_cast<double>(replay::kTlogGapUs) * 1e-6, r.log_gap_s,
+               static_cast<double>(importers::kTlogGapUs) * 1e-6, r.log_gap_s,
                r.time_back > 0 ? (", its time stepped back " + std::to_string(r.time_back) + "x").c_str() : "");
-  print_gaps(r.gaps);
-  print_damage(o, r.damage, "every valid record is imported");
-  std::printf("%lld\n", static_cast<long long>(r.session));
+  print_end(r.gaps, problems, r.session);
   return 0;
 }
 
@@ -234,29 +242,26 @@ int run_import(const ImportCommandOptions& o) {
   if (o.no_reference) throw std::invalid_argument("--no-reference is for ulog, tlog and dataflash");
   if (!o.imu_message.empty()) throw std::invalid_argument("--imu-message is for tlog");
   if (o.imu >= 0) throw std::invalid_argument("--imu is for dataflash");
-  replay::EurocImportOptions options{.dir = o.dir,
-                                     .accel_lsb = o.accel_lsb,
-                                     .gyro_lsb = o.gyro_lsb,
-                                     .imu_axes = o.imu_axes,
-                                     .gap_threshold_s = o.gap_threshold_s};
-  if (!o.reference.empty()) options.reference = {o.reference, replay::parse_reference_format(o.reference_format)};
-  const auto r = import_with_progress(o, options, replay::import_euroc);  // the bytes of its mav0/imu0/data.csv
+  importers::EurocImportOptions options{.dir = o.dir,
+                                        .accel_lsb = o.accel_lsb,
+                                        .gyro_lsb = o.gyro_lsb,
+                                        .imu_axes = o.imu_axes,
+                                        .gap_threshold_s = o.gap_threshold_s};
+  if (!o.reference.empty()) options.reference = {o.reference, importers::parse_reference_format(o.reference_format)};
+  ProblemLines problems;
+  const auto r = import_with_progress(o, options, importers::import_euroc, problems);  // of its mav0/imu0/data.csv
   std::fprintf(stderr, "imported %llu IMU rows of %s into %s as session %lld\n",
                static_cast<unsigned long long>(r.imu.rows), r.imu.path.c_str(), o.db.c_str(),
                static_cast<long long>(r.session));
   print_axes(r.axes);
-  print_lines("skipped", r.imu, r.imu.skipped);
-  print_lines("warning: clipped values in", r.imu, r.clipped);
   if (r.reference) {
     std::fprintf(stderr, "reference: %llu rows of %s%s\n", static_cast<unsigned long long>(r.reference->rows),
                  r.reference->path.c_str(),
                  r.velocity_derived ? ", velocity derived from the positions (quadratic fit over +-0.1 s)" : "");
-    print_lines("skipped", *r.reference, r.reference->skipped);
   } else {
     std::fprintf(stderr, "no reference trajectory (give one with --reference)\n");
   }
-  print_gaps(r.gaps);
-  std::printf("%lld\n", static_cast<long long>(r.session));
+  print_end(r.gaps, problems, r.session);
   return 0;
 }
 

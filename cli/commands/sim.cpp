@@ -25,7 +25,7 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/calibration.hpp"
-#include "replay/tlog.hpp"
+#include "importers/tlog.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
@@ -298,7 +298,7 @@ int write_tlog(const SimOptions& o, const sim::SimConfig& config) {
     bytes.clear();
     telemetry.encode(in_axes(s), frames);
     const auto t = kEpochUs + static_cast<std::uint64_t>(std::llround(s.time_s * 1e6));
-    for (const auto& frame : frames) replay::tlog::append_record(bytes, t, frame);
+    for (const auto& frame : frames) importers::tlog::append_record(bytes, t, frame);
     file.stream().write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
     records += frames.size();
   });

@@ -281,11 +281,15 @@ TEST_F(ReplayCommand, ImportsAMessyEurocFixtureReportingEverySkippedRow) {
                                (fixture / "reference_tum.txt").string() + " --db " + db_.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto err = r.err;
-  for (const char* expected :
-       {"skipped 9 rows of", "1 row: 3 fields, expected 7 (line 5)", "4 rows: not a finite number (lines 8-9, 16-17)",
-        "2 rows: empty field (lines 14-15)", "1 row: timestamp not after the previous row's (line 11)",
-        "warning: clipped values in 1 row of", "1 row: accel beyond +-65.534 m/s^2, clipped (line 12)",
-        "reference: 11 rows", "1 row: quaternion not of unit length (line 15)"}) {
+  const std::string imu = (fixture / "mav0/imu0/data.csv").string(), tum = (fixture / "reference_tum.txt").string();
+  for (const std::string& expected :
+       {"\n1 row of " + imu + " skipped: 3 fields, expected 7 (line 5)\n",
+        "\n4 rows of " + imu + " skipped: not a finite number (lines 8-9, 16-17)\n",
+        "\n2 rows of " + imu + " skipped: empty field (lines 14-15)\n",
+        "\n1 row of " + imu + " skipped: timestamp not after the previous row's (line 11)\n",
+        "\nwarning: 1 row of " + imu + " clipped: accel beyond +-65.534 m/s^2 (line 12)\n",
+        std::string("\nreference: 11 rows"),
+        "\n1 row of " + tum + " skipped: quaternion not of unit length (line 15)\n"}) {
     EXPECT_NE(err.find(expected), std::string::npos) << "missing \"" << expected << "\" in:\n" << err;
   }
   const std::int64_t session = std::stoll(last_line(r.out));

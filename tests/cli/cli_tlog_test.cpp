@@ -112,8 +112,10 @@ TEST(TlogCli, ATruncatedLogImportsUpToTheDamageAndSaysSo) {
   const auto r = run_imubridge("import tlog " + tlog + " --db " + db);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("imported 599 IMU samples"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("warning: " + tlog + " is damaged: 52 bytes at byte " + std::to_string(size - 82) +
-                       " (after record 719): the last record, cut short (52 bytes of its 82; the file ends)"),
+  EXPECT_NE(r.err.find("\nwarning: 52 bytes of " + tlog +
+                       " damaged: the last record, cut short (52 bytes of its 82; the file ends); the records around "
+                       "them are imported (at byte " +
+                       std::to_string(size - 82) + ", after record 719)\n"),
             std::string::npos)
       << r.err;
 }
@@ -168,7 +170,8 @@ TEST(TlogCli, GarbageIsRefusedInOneLine) {
   EXPECT_NE(wrong.err.find("--protocol mavlink"), std::string::npos) << wrong.err;
 }
 
-// `import dataflash` reads ArduPilot logs (tests/replay/dataflash_import_test.cpp); what is none is refused in one line.
+// `import dataflash` reads ArduPilot logs (tests/importers/dataflash_import_test.cpp); what is none is refused in one
+// line.
 TEST(TlogCli, WhatIsNoDataflashLogIsRefusedInOneLine) {
   TempDir dir;
   const std::string path = (dir / "00000001.BIN").string();

@@ -1,4 +1,4 @@
-// The importers' progress callback (replay/import_progress.hpp) and `imubridge import`'s progress line on a terminal
+// The importers' progress callback (importers/import_progress.hpp) and `imubridge import`'s progress line on a terminal
 // (daemon/import_progress_line.hpp): bytes never go back and end at the file's size, samples end at those imported,
 // and the line is drawn only where it is shown, at most about ten times a second, and ended with a newline.
 #include <gtest/gtest.h>
@@ -13,16 +13,16 @@
 #include <vector>
 
 #include "cli/import_progress_line.hpp"
-#include "replay/euroc_import.hpp"
-#include "replay/tlog.hpp"
-#include "replay/tlog_import.hpp"
-#include "replay/ulog.hpp"
-#include "replay/ulog_import.hpp"
+#include "importers/euroc_import.hpp"
+#include "importers/tlog.hpp"
+#include "importers/tlog_import.hpp"
+#include "importers/ulog.hpp"
+#include "importers/ulog_import.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 #include "tests/support/temp_dir.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -162,4 +162,4 @@ TEST(ImportProgressLine, NothingWhereItIsNotShown) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,4 +1,4 @@
-#include "replay/dataflash_import.hpp"
+#include "importers/dataflash_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,9 +11,9 @@
 #include <utility>
 #include <vector>
 
-#include "replay/dataflash.hpp"
+#include "importers/dataflash.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 constexpr double kRadiansPerDegree = M_PI / 180;
@@ -140,10 +140,10 @@ std::vector<store::ReferenceRow> reference_rows(const dataflash::Log& log, std::
     if (!att_angles) return rows;
     for (std::size_t r = 0; r < att->size(); ++r) {
       const auto rpy = vec3(*att, r, *att_angles);
-      att_series.add(att->times[r],
-                     attitude_from_euler(rpy[0] * kRadiansPerDegree, rpy[1] * kRadiansPerDegree,
-                                         rpy[2] * kRadiansPerDegree),
-                     skipped);
+      att_series.add(
+          att->times[r],
+          attitude_from_euler(rpy[0] * kRadiansPerDegree, rpy[1] * kRadiansPerDegree, rpy[2] * kRadiansPerDegree),
+          skipped);
     }
   }
   source = ekf->name + (angles ? " (attitude from its Roll, Pitch, Yaw)" : " (attitude from ATT)");
@@ -188,11 +188,11 @@ std::vector<store::ReferenceRow> reference_rows(const dataflash::Log& log, std::
 // ArduCopter's flight modes (its MODE records' numbers); other vehicles' modes are given by number.
 std::string copter_mode_name(std::int64_t mode) {
   static const std::map<std::int64_t, const char*> kNames = {
-      {0, "STABILIZE"},  {1, "ACRO"},       {2, "ALT_HOLD"},     {3, "AUTO"},       {4, "GUIDED"},
-      {5, "LOITER"},     {6, "RTL"},        {7, "CIRCLE"},       {9, "LAND"},       {11, "DRIFT"},
-      {13, "SPORT"},     {14, "FLIP"},      {15, "AUTOTUNE"},    {16, "POSHOLD"},   {17, "BRAKE"},
-      {18, "THROW"},     {19, "AVOID_ADSB"}, {20, "GUIDED_NOGPS"}, {21, "SMART_RTL"}, {22, "FLOWHOLD"},
-      {23, "FOLLOW"},    {24, "ZIGZAG"},    {25, "SYSTEMID"},    {26, "AUTOROTATE"}, {27, "AUTO_RTL"}};
+      {0, "STABILIZE"}, {1, "ACRO"},        {2, "ALT_HOLD"},      {3, "AUTO"},        {4, "GUIDED"},
+      {5, "LOITER"},    {6, "RTL"},         {7, "CIRCLE"},        {9, "LAND"},        {11, "DRIFT"},
+      {13, "SPORT"},    {14, "FLIP"},       {15, "AUTOTUNE"},     {16, "POSHOLD"},    {17, "BRAKE"},
+      {18, "THROW"},    {19, "AVOID_ADSB"}, {20, "GUIDED_NOGPS"}, {21, "SMART_RTL"},  {22, "FLOWHOLD"},
+      {23, "FOLLOW"},   {24, "ZIGZAG"},     {25, "SYSTEMID"},     {26, "AUTOROTATE"}, {27, "AUTO_RTL"}};
   const auto it = kNames.find(mode);
   return it == kNames.end() ? "" : it->second;
 }
@@ -227,7 +227,8 @@ std::vector<LogEvent> events(const dataflash::Log& log, DataflashImportResult& r
   if (const auto* ev = log.message("EV"); ev) {
     for (std::size_t r = 0; ev->field("Id") && r < ev->size(); ++r) {
       const std::int64_t id = ev->integer(r, *ev->field("Id"));
-      if (id == kArmedEvent || id == kDisarmedEvent) arming(ev->times[r], id == kArmedEvent, "EV " + std::to_string(id));
+      if (id == kArmedEvent || id == kDisarmedEvent)
+        arming(ev->times[r], id == kArmedEvent, "EV " + std::to_string(id));
     }
   }
   if (const auto* arm = log.message("ARM"); arm) {
@@ -284,8 +285,9 @@ nlohmann::json metadata(const dataflash::Log& log, const DataflashImportOptions&
 }  // namespace
 
 DataflashImportResult import_dataflash(store::Store& store, const DataflashImportOptions& options) {
-  const ImuLogSettings settings = imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes,
-                                                   options.gap_threshold_s, options.progress, options.file);
+  const ImuLogSettings settings =
+      imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes, options.gap_threshold_s, options.progress,
+                       options.file, options.on_problem);
   const dataflash::Log log = dataflash::read_file(options.file, options.progress);
   const std::string file = options.file.string();
 
@@ -332,4 +334,4 @@ DataflashImportResult import_dataflash(store::Store& store, const DataflashImpor
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

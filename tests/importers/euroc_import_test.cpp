@@ -1,6 +1,6 @@
 // EuRoC import: messy rows skipped and counted by line and reason, the frames' calibration and clock, the
 // reference's conventions (NED, body -> NED), the velocity differentiator, and the real MH_01_easy flight.
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,13 +13,21 @@
 #include <numeric>
 #include <sstream>
 
-#include "replay/position_derivative.hpp"
+#include "importers/position_derivative.hpp"
 #include "replay/text_table.hpp"
+#include "tests/support/reported_problems.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
+// The text tables the importer reads its files with (replay/text_table.hpp), tested here with the files they read.
+using replay::format_ranges;
+using replay::LinesByReason;
+using replay::parse_scaled_integer;
+using replay::read_table;
+using replay::TableLayout;
+using replay::TableRow;
 
 const fs::path kFixture = fs::path(IMUBRIDGE_SOURCE_DIR) / "tests/data/euroc_junk";
 constexpr std::int64_t kT0 = 1403636579758560000;  // the fixture's first IMU stamp, ns
@@ -44,6 +52,8 @@ class EurocImport : public ::testing::Test {
 };
 
 using Lines = std::vector<std::int64_t>;
+using Places = std::map<std::string, std::string>;  // where the rows skipped for a reason are
+using test::ReportedProblems;
 
 TEST(ParseScaledInteger, IsExactWhereADoubleWouldRound) {
   // 1.40363657975856e18 is not a double: the nearest one is 256 ns away.
@@ -175,17 +185,18 @@ TEST(VelocityFromPositions, TakesStampsFurtherApartThanAnInt64DifferenceHolds) {
 
 TEST_F(EurocImport, SkipsEveryKindOfJunkRowAndCountsItByLine) {
   store::Store store(db_);
-  const auto r = import_euroc(store, {.dir = kFixture});
+  ReportedProblems problems;
+  const auto r = import_euroc(store, {.dir = kFixture, .on_problem = problems.callback()});
   EXPECT_EQ(r.imu.rows, 7u);
-  EXPECT_EQ(r.imu.skipped.count(), 9u);
-  std::map<std::string, Lines> want{{"3 fields, expected 7", {5}},
-                                    {"8 fields, expected 7", {13}},
-                                    {"empty field", {14, 15}},
-                                    {"not a finite number", {8, 9, 16, 17}},
-                                    {"timestamp not after the previous row's", {11}}};
-  EXPECT_EQ(r.imu.skipped.lines, want);
-  EXPECT_EQ(r.clipped.count(), 1u);
-  EXPECT_EQ(r.clipped.lines.begin()->second, Lines{12});
+  EXPECT_EQ(problems.total(ProblemKind::skipped, "data.csv"), 9u);
+  const Places want{{"3 fields, expected 7", "line 5"},
+                    {"8 fields, expected 7", "line 13"},
+                    {"empty field", "lines 14-15"},
+                    {"not a finite number", "lines 8-9, 16-17"},
+                    {"timestamp not after the previous row's", "line 11"}};
+  EXPECT_EQ(problems.places(ProblemKind::skipped, "data.csv"), want);
+  EXPECT_EQ(problems.places(ProblemKind::clipped), (Places{{"accel beyond +-65.534 m/s^2", "line 12"}}));
+  EXPECT_EQ(problems.total(ProblemKind::clipped), 1u);
   EXPECT_FALSE(r.reference.has_value());  // the fixture has no state_groundtruth_estimate0
 
   // The same, for whoever reads the session later: one event per reason, with its count.
@@ -193,6 +204,35 @@ TEST_F(EurocImport, SkipsEveryKindOfJunkRowAndCountsItByLine) {
   for (const auto& e : store.events(r.session)) events[e.kind] += e.count;
   EXPECT_EQ(events["import_skipped"], 9);
   EXPECT_EQ(events["import_clipped"], 1);
+}
+
+// A copy cut off in the middle of its last row: that row is a problem with its line, the rows before it are stored.
+TEST_F(EurocImport, ATruncatedImuFileReportsItsCutRowAndKeepsTheRowsBeforeIt) {
+  fs::create_directories(dir_ / "cut/mav0/imu0");
+  std::ofstream(dir_ / "cut/mav0/imu0/data.csv") << "#timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z\n"
+                                                    "1000000000,0,0,0,0,0,9.8\n"
+                                                    "1005000000,0,0,0,0,0,9.8\n"
+                                                    "1010000000,0,0,0,0,0,9.8\n"
+                                                    "1015000000,0,0,0,0";
+  store::Store store(db_);
+  ReportedProblems problems;
+  const auto r = import_euroc(store, {.dir = dir_ / "cut", .on_problem = problems.callback()});
+  const auto skipped = problems.of(ProblemKind::skipped);
+  ASSERT_EQ(skipped.size(), 1u);
+  EXPECT_EQ(skipped[0].count, 1u);
+  EXPECT_EQ(skipped[0].what, "row of " + (dir_ / "cut/mav0/imu0/data.csv").string());
+  EXPECT_EQ(skipped[0].why, "5 fields, expected 7");
+  EXPECT_EQ(skipped[0].where, "line 5");
+  EXPECT_EQ(describe(skipped[0]),
+            "1 row of " + (dir_ / "cut/mav0/imu0/data.csv").string() + " skipped: 5 fields, expected 7 (line 5)");
+  EXPECT_EQ(r.imu.rows, 3u);
+  EXPECT_EQ(samples(store, r.session).size(), 3u);
+  std::vector<std::string> stored;  // the session's own words for it
+  for (const auto& e : store.events(r.session)) {
+    if (e.kind == "import_skipped") stored.push_back(e.detail);
+  }
+  EXPECT_EQ(stored, std::vector<std::string>{(dir_ / "cut/mav0/imu0/data.csv").string() +
+                                             ": 1 row: 5 fields, expected 7 (line 5)"});
 }
 
 TEST_F(EurocImport, SamplesCarryTheRowsOnTheDatasetClockWithinHalfACount) {
@@ -236,13 +276,17 @@ TEST_F(EurocImport, TheDeviceClockSpansStampsFurtherApartThanAnInt64DifferenceHo
 
 TEST_F(EurocImport, TumReferenceIsStoredInNedWithItsVelocityDerived) {
   store::Store store(db_);
-  const auto r = import_euroc(store, {.dir = kFixture, .reference = ReferenceFile{kFixture / "reference_tum.txt"}});
+  ReportedProblems problems;
+  const auto r = import_euroc(
+      store,
+      {.dir = kFixture, .reference = ReferenceFile{kFixture / "reference_tum.txt"}, .on_problem = problems.callback()});
   ASSERT_TRUE(r.reference.has_value());
   EXPECT_TRUE(r.velocity_derived);
   EXPECT_EQ(r.reference->rows, 11u);
-  std::map<std::string, Lines> want{
-      {"not a finite number", {13}}, {"4 fields, expected 8", {14}}, {"quaternion not of unit length", {15}}};
-  EXPECT_EQ(r.reference->skipped.lines, want);
+  const Places want{{"not a finite number", "line 13"},
+                    {"4 fields, expected 8", "line 14"},
+                    {"quaternion not of unit length", "line 15"}};
+  EXPECT_EQ(problems.places(ProblemKind::skipped, "reference_tum.txt"), want);
 
   const auto rows = reference(store, r.session);
   ASSERT_EQ(rows.size(), 11u);
@@ -288,15 +332,17 @@ TEST_F(EurocImport, RealMh01EasyFlight) {
   const fs::path data = fs::path(IMUBRIDGE_SOURCE_DIR) / "../shared/data/real/euroc_mh01";
   if (!fs::exists(data / "mav0/imu0/data.csv")) GTEST_SKIP() << "no EuRoC MH_01_easy copy at " << data;
   store::Store store(db_);
-  const auto r = import_euroc(store, {.dir = data, .reference = ReferenceFile{data / "MH_01_easy.txt"}});
+  ReportedProblems problems;
+  const auto r = import_euroc(
+      store, {.dir = data, .reference = ReferenceFile{data / "MH_01_easy.txt"}, .on_problem = problems.callback()});
   EXPECT_EQ(r.imu.rows, 36820u);
-  std::map<std::string, Lines> junk{{"empty field", {36822, 36823, 36824, 36825, 36826, 36827}},
-                                    {"not a finite number", {36828}}};
-  EXPECT_EQ(r.imu.skipped.lines, junk);
-  EXPECT_EQ(r.clipped.count(), 0u);  // the default resolutions cover its 60 m/s^2 and 4 rad/s peaks
+  const Places junk{{"empty field", "lines 36822-36827"}, {"not a finite number", "line 36828"}};
+  EXPECT_EQ(problems.places(ProblemKind::skipped, "data.csv"), junk);
+  EXPECT_EQ(problems.total(ProblemKind::skipped, "data.csv"), 7u);
+  EXPECT_TRUE(problems.of(ProblemKind::clipped).empty());  // the default resolutions cover its 60 m/s^2 and 4 rad/s
   ASSERT_TRUE(r.reference.has_value());
   EXPECT_EQ(r.reference->rows, 36382u);
-  EXPECT_EQ(r.reference->skipped.count(), 0u);
+  EXPECT_TRUE(problems.of(ProblemKind::skipped, "MH_01_easy.txt").empty());
 
   const auto imu = samples(store, r.session);
   const auto ref = reference(store, r.session);
@@ -331,4 +377,4 @@ TEST_F(EurocImport, RealMh01EasyFlight) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

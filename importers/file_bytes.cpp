@@ -1,9 +1,9 @@
-#include "replay/file_bytes.hpp"
+#include "importers/file_bytes.hpp"
 
 #include <fstream>
 #include <system_error>
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 std::optional<std::vector<std::uint8_t>> read_file_bytes(const std::filesystem::path& path) {
   std::error_code error;
@@ -18,4 +18,4 @@ std::optional<std::vector<std::uint8_t>> read_file_bytes(const std::filesystem::
   return bytes;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

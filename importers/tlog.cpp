@@ -1,11 +1,11 @@
-#include "replay/tlog.hpp"
+#include "importers/tlog.hpp"
 
 #include <iterator>
 
 #include "protocol/mavlink.hpp"
-#include "replay/file_bytes.hpp"
+#include "importers/file_bytes.hpp"
 
-namespace imubridge::replay::tlog {
+namespace imubridge::importers::tlog {
 namespace {
 
 namespace mavlink = protocol::mavlink;
@@ -173,4 +173,4 @@ void append_record(std::vector<std::uint8_t>& out, std::uint64_t time_us, std::s
   out.insert(out.end(), frame.begin(), frame.end());
 }
 
-}  // namespace imubridge::replay::tlog
+}  // namespace imubridge::importers::tlog

@@ -9,7 +9,7 @@
 #include <span>
 #include <vector>
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 // t_ns strictly increasing. A sample with fewer than 3 positions in its window gets no velocity. Throws
 // std::invalid_argument when the lengths differ.
@@ -17,4 +17,4 @@ std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<co
                                                                     std::span<const Eigen::Vector3d> positions,
                                                                     double half_window_s = 0.1);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -16,9 +16,9 @@
 #include <string_view>
 #include <vector>
 
-#include "replay/import_progress.hpp"
+#include "importers/import_progress.hpp"
 
-namespace imubridge::replay::ulog {
+namespace imubridge::importers::ulog {
 
 // Whatever keeps a file from being read at all: not a ULog, a broken header, flag bits or definition. One line.
 struct ParseError : std::invalid_argument {
@@ -118,4 +118,4 @@ struct Log {
 Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& progress = {});
 Log read_file(const std::filesystem::path& path, const ImportProgressCallback& progress = {});
 
-}  // namespace imubridge::replay::ulog
+}  // namespace imubridge::importers::ulog

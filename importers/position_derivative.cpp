@@ -1,4 +1,4 @@
-#include "replay/position_derivative.hpp"
+#include "importers/position_derivative.hpp"
 
 #include <Eigen/Cholesky>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "replay/text_table.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<const std::int64_t> t_ns,
                                                                     std::span<const Eigen::Vector3d> positions,
@@ -17,8 +17,8 @@ std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<co
   std::vector<std::optional<Eigen::Vector3d>> velocity(t_ns.size());
   std::size_t first = 0, last = 0;  // the window [first, last)
   for (std::size_t i = 0; i < t_ns.size(); ++i) {
-    while (elapsed_ns(t_ns[first], t_ns[i]) > window) ++first;
-    while (last < t_ns.size() && elapsed_ns(t_ns[i], t_ns[last]) <= window) ++last;
+    while (replay::elapsed_ns(t_ns[first], t_ns[i]) > window) ++first;
+    while (last < t_ns.size() && replay::elapsed_ns(t_ns[i], t_ns[last]) <= window) ++last;
     if (last - first < 3) continue;
     // p(s) = a + b s + c s^2 with s = (t - t_i) / half_window, so the normal equations stay well conditioned.
     Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
@@ -35,4 +35,4 @@ std::vector<std::optional<Eigen::Vector3d>> velocity_from_positions(std::span<co
   return velocity;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,7 +1,6 @@
-#include "replay/euroc_import.hpp"
+#include "importers/euroc_import.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -12,14 +11,13 @@
 #include <stdexcept>
 #include <utility>
 
-#include "pipeline/record_and_decode.hpp"
-#include "pipeline/recorded_session.hpp"
-#include "pipeline/session_engine.hpp"
+#include "importers/import_session.hpp"
+#include "importers/log_import.hpp"
+#include "importers/position_derivative.hpp"
 #include "protocol/imu_frame.hpp"
-#include "replay/log_import.hpp"
-#include "replay/position_derivative.hpp"
+#include "replay/text_table.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
@@ -31,9 +29,9 @@ std::ifstream open_input(const fs::path& path) {
   return in;
 }
 
-std::string no_rows_message(const ImportedFile& file) {
-  std::string message = file.path.string() + ": no usable rows";
-  for (const auto& line : file.skipped.summary()) message += "; " + line;
+std::string no_rows_message(const fs::path& file, const replay::LinesByReason& skipped) {
+  std::string message = file.string() + ": no usable rows";
+  for (const auto& line : skipped.summary()) message += "; " + line;
   return message;
 }
 
@@ -50,15 +48,15 @@ std::optional<std::array<double, 4>> ned_attitude(double w, double x, double y, 
 }
 
 // The rows in the estimator's conventions; a TUM file's velocities derived from its positions.
-std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, ImportedFile& report) {
+std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, replay::LinesByReason& skipped) {
   std::ifstream in = open_input(file.path);
   const bool tum = file.format == ReferenceFormat::tum;
-  const TableLayout layout =
-      tum ? TableLayout{' ', 9, 8, 8} : TableLayout{',', 0, 11, std::numeric_limits<std::size_t>::max()};
+  const replay::TableLayout layout = tum ? replay::TableLayout{' ', 9, 8, 8}
+                                         : replay::TableLayout{',', 0, 11, std::numeric_limits<std::size_t>::max()};
   std::vector<store::ReferenceRow> rows;
-  read_table(
+  replay::read_table(
       in, layout,
-      [&](const TableRow& row) -> std::optional<std::string> {
+      [&](const replay::TableRow& row) -> std::optional<std::string> {
         const auto& v = row.values;
         const auto q = tum ? ned_attitude(v[6], v[3], v[4], v[5]) : ned_attitude(v[3], v[4], v[5], v[6]);
         if (!q) return "quaternion not of unit length";
@@ -67,9 +65,8 @@ std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, Impor
         if (!tum) r.velocity = ned_from_zup(v[7], v[8], v[9]);
         return std::nullopt;
       },
-      report.skipped);
-  report.rows = rows.size();
-  if (rows.empty()) throw std::invalid_argument(no_rows_message(report));
+      skipped);
+  if (rows.empty()) throw std::invalid_argument(no_rows_message(file.path, skipped));
   if (tum) {
     std::vector<std::int64_t> t;
     std::vector<Eigen::Vector3d> p;
@@ -87,19 +84,21 @@ std::vector<store::ReferenceRow> read_reference(const ReferenceFile& file, Impor
 
 std::string range_text(double lsb, const char* unit) {
   char text[64];
-  std::snprintf(text, sizeof text, "beyond +-%g %s, clipped", lsb * std::numeric_limits<std::int16_t>::max(), unit);
+  std::snprintf(text, sizeof text, "beyond +-%g %s", lsb * std::numeric_limits<std::int16_t>::max(), unit);
   return text;
 }
 
-void record_lines(store::Store& store, std::int64_t session, std::optional<std::int64_t> link, std::int64_t t_ns,
-                  const char* kind, const fs::path& file, const LinesByReason& lines) {
-  for (const auto& [reason, at] : lines.lines) {
-    store.append_event(session, {.link_id = link,
-                                 .mono_ns = t_ns,
-                                 .wall_ns = t_ns,
-                                 .kind = kind,
-                                 .count = static_cast<std::int64_t>(at.size()),
-                                 .detail = file.string() + ": " + LinesByReason::describe(reason, at)});
+// Each reason's rows as a problem of `kind`, stored at `at`; `stored_suffix` ends the reason in the event's detail.
+void report_lines(ImportSession& session, const EventAt& at, ProblemKind kind, const fs::path& file,
+                  const replay::LinesByReason& lines, const std::string& stored_suffix = "") {
+  for (const auto& [reason, numbers] : lines.lines) {
+    const bool one = numbers.size() == 1;
+    session.report({.kind = kind,
+                    .count = numbers.size(),
+                    .what = (one ? "row of " : "rows of ") + file.string(),
+                    .why = reason,
+                    .where = (one ? "line " : "lines ") + replay::format_ranges(numbers)},
+                   at, file.string() + ": " + replay::LinesByReason::describe(reason + stored_suffix, numbers));
   }
 }
 
@@ -124,48 +123,49 @@ nlohmann::json session_config(const EurocImportOptions& options, const std::opti
             {"gyro_lsb", options.gyro_lsb}}}};
 }
 
-// The IMU rows, as read_table hands them, encoded as frames through the session engine. The session begins with the
+// Rows skipped or clipped, by line and reason, as the files were read.
+struct RowProblems {
+  replay::LinesByReason imu_skipped, clipped, reference_skipped;
+};
+
+// The IMU rows, as read_table hands them, encoded as frames fed to the import's session. The session begins with the
 // first usable row, so a file without one leaves nothing behind. The dataset's timestamps (Unix time, ns) serve as
-// both receive clocks; the device clock starts at 0 with the first row. The frames go through the session engine
-// without estimation: an import has no parameters (a replay estimates).
+// both receive clocks; the device clock starts at 0 with the first row.
 class ImuRecording {
  public:
   ImuRecording(store::Store& store, const EurocImportOptions& options, const protocol::Calibration& calibration,
-               nlohmann::json config, EurocImportResult& result)
+               nlohmann::json config, EurocImportResult& result, replay::LinesByReason& clipped)
       : store_(store),
         options_(options),
         calibration_(calibration),
         config_(std::move(config)),
         result_(result),
+        clipped_(clipped),
         accel_beyond_("accel " + range_text(options.accel_lsb, "m/s^2")),
         gyro_beyond_("gyro " + range_text(options.gyro_lsb, "rad/s")) {}
 
-  void add(const TableRow& row) {
-    if (!recording_) begin(row.t_ns);
+  void add(const replay::TableRow& row) {
+    if (!session_) begin(row.t_ns);
     const auto& v = row.values;  // EuRoC's order: gyro xyz, then accel xyz
     const std::array gyro{v[0], v[1], v[2]}, accel{v[3], v[4], v[5]};
-    if (beyond_frame_range(accel, options_.accel_lsb)) result_.clipped.add(row.line, accel_beyond_);
-    if (beyond_frame_range(gyro, options_.gyro_lsb)) result_.clipped.add(row.line, gyro_beyond_);
-    const std::uint64_t since_t0 = elapsed_ns(t0_, row.t_ns);
+    if (beyond_frame_range(accel, options_.accel_lsb)) clipped_.add(row.line, accel_beyond_);
+    if (beyond_frame_range(gyro, options_.gyro_lsb)) clipped_.add(row.line, gyro_beyond_);
+    const std::uint64_t since_t0 = replay::elapsed_ns(t0_, row.t_ns);
     bytes_.clear();
     protocol::imu::encode({.seq = static_cast<std::uint16_t>(result_.imu.rows),
                            .device_time_us = since_t0 / 1000 + (since_t0 % 1000 >= 500 ? 1 : 0),
                            .payload = calibration_.to_counts(accel, gyro, {}, 0.0)},
                           bytes_);
-    engine_.on_chunk(0, *recording_, bytes_, row.t_ns, row.t_ns);
+    session_->feed(bytes_, row.t_ns, row.t_ns);
     ++result_.imu.rows;
     last_t_ = row.t_ns;
     samples_.add(static_cast<double>(since_t0) * 1e-9, row.t_ns, accel, gyro);
-    store_.commit_if_due(std::chrono::steady_clock::now());
   }
 
-  bool begun() const { return recording_.has_value(); }
+  bool begun() const { return session_.has_value(); }
   // Finishes the link at the last row's time.
-  void finish() {
-    engine_.finish_link(0, *recording_, last_t_, last_t_);
-    engine_.finish();
-  }
-  std::int64_t link() const { return link_; }
+  void finish() { session_->finish_link(last_t_, last_t_); }
+  ImportSession& session() { return *session_; }
   std::int64_t first_t() const { return t0_; }
   std::int64_t last_t() const { return last_t_; }
   const ImportedSamples& samples() const { return samples_; }
@@ -173,17 +173,16 @@ class ImuRecording {
  private:
   void begin(std::int64_t t0) {
     t0_ = t0;
-    pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+    session_.emplace(
         store_,
-        {.kind = "import",
-         .source = "EuRoC dataset " + options_.dir.string(),
-         .config = config_,
-         .started_wall_ns = t0_},
-        {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration_, options_.imu_axes},
-          .device = "EuRoC imu0, " + result_.imu.path.string()}});
-    result_.session = recorded.id;
-    link_ = recorded.store_links[0];
-    recording_.emplace(std::move(recorded.recorders[0]));
+        pipeline::SessionStart{.kind = "import",
+                               .source = "EuRoC dataset " + options_.dir.string(),
+                               .config = config_,
+                               .started_wall_ns = t0_},
+        pipeline::SessionLink{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration_, options_.imu_axes},
+                              .device = "EuRoC imu0, " + result_.imu.path.string()},
+        options_.on_problem);
+    result_.session = session_->id();
   }
 
   store::Store& store_;
@@ -191,10 +190,10 @@ class ImuRecording {
   const protocol::Calibration& calibration_;
   const nlohmann::json config_;
   EurocImportResult& result_;
+  replay::LinesByReason& clipped_;
   const std::string accel_beyond_, gyro_beyond_;
-  pipeline::SessionEngine engine_{nullptr};
-  std::optional<pipeline::RecordAndDecode> recording_;
-  std::int64_t link_ = 0, t0_ = 0, last_t_ = 0;
+  std::optional<ImportSession> session_;
+  std::int64_t t0_ = 0, last_t_ = 0;
   std::vector<std::uint8_t> bytes_;
   ImportedSamples samples_;
 };
@@ -209,14 +208,45 @@ void report_progress(std::ifstream& imu, std::uint64_t imu_size, std::uint64_t r
   }
 }
 
-// What the import left out or clipped, as events at the last row.
-void record_import_events(store::Store& store, const EurocImportResult& result, std::int64_t link, std::int64_t t_ns) {
-  record_lines(store, result.session, link, t_ns, "import_skipped", result.imu.path, result.imu.skipped);
-  record_lines(store, result.session, link, t_ns, "import_clipped", result.imu.path, result.clipped);
+// What the import left out or clipped, as problems at the last row.
+void report_problems(ImuRecording& recording, const EurocImportResult& result, const RowProblems& problems) {
+  ImportSession& session = recording.session();
+  const std::int64_t t = recording.last_t();
+  const EventAt on_link{.link = session.link(), .mono_ns = t, .wall_ns = t};
+  report_lines(session, on_link, ProblemKind::skipped, result.imu.path, problems.imu_skipped);
+  report_lines(session, on_link, ProblemKind::clipped, result.imu.path, problems.clipped, ", clipped");
   if (result.reference) {
-    record_lines(store, result.session, std::nullopt, t_ns, "import_skipped", result.reference->path,
-                 result.reference->skipped);
+    report_lines(session, {.mono_ns = t, .wall_ns = t}, ProblemKind::skipped, result.reference->path,
+                 problems.reference_skipped);
   }
+}
+
+// The IMU file's rows recorded, its progress reported as it is read.
+void read_imu(std::ifstream& imu, const EurocImportOptions& options, ImuRecording& recording,
+              const EurocImportResult& result, replay::LinesByReason& skipped) {
+  const std::uint64_t imu_size = options.progress ? fs::file_size(result.imu.path) : 0;
+  replay::read_table(
+      imu, {',', 0, 7, 7},
+      [&](const replay::TableRow& row) -> std::optional<std::string> {
+        recording.add(row);
+        if (options.progress && result.imu.rows % kImportProgressEvery == 0 && !imu.eof()) {
+          report_progress(imu, imu_size, result.imu.rows, options.progress);
+        }
+        return std::nullopt;
+      },
+      skipped);
+  if (!recording.begun()) throw std::invalid_argument(no_rows_message(result.imu.path, skipped));
+  if (options.progress) options.progress({.bytes_read = imu_size, .bytes_total = imu_size, .samples = result.imu.rows});
+}
+
+// The options checked before anything is read: the declared IMU axes.
+estimator::ImuAxes checked_options(const EurocImportOptions& options, const protocol::Calibration& calibration) {
+  if (!calibration.valid() || options.accel_lsb <= 0 || options.gyro_lsb <= 0) {
+    throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
+  }
+  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
+  check_gap_threshold(options.gap_threshold_s);
+  return declared_axes;
 }
 
 }  // namespace
@@ -236,54 +266,32 @@ protocol::Calibration import_calibration(double accel_lsb, double gyro_lsb) {
 
 EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& options) {
   const auto calibration = import_calibration(options.accel_lsb, options.gyro_lsb);
-  if (!calibration.valid() || options.accel_lsb <= 0 || options.gyro_lsb <= 0) {
-    throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
-  }
-  const estimator::ImuAxes declared_axes = estimator::parse_imu_axes(options.imu_axes);
-  check_gap_threshold(options.gap_threshold_s);
+  const estimator::ImuAxes declared_axes = checked_options(options, calibration);
   EurocImportResult result;
+  RowProblems problems;
   result.imu.path = options.dir / "mav0" / "imu0" / "data.csv";
   std::ifstream imu = open_input(result.imu.path);
-  const std::uint64_t imu_size = options.progress ? fs::file_size(result.imu.path) : 0;
   const std::optional<ReferenceFile> reference = reference_file(options);
   std::vector<store::ReferenceRow> reference_rows;
   if (reference) {
-    result.reference = ImportedFile{.path = reference->path};
-    reference_rows = read_reference(*reference, *result.reference);
+    reference_rows = read_reference(*reference, problems.reference_skipped);
+    result.reference = ImportedFile{.path = reference->path, .rows = reference_rows.size()};
     result.velocity_derived = reference->format == ReferenceFormat::tum;
   }
 
   ImuRecording recording(store, options, calibration, session_config(options, reference, result.velocity_derived),
-                         result);
-  read_table(
-      imu, {',', 0, 7, 7},
-      [&](const TableRow& row) -> std::optional<std::string> {
-        recording.add(row);
-        if (options.progress && result.imu.rows % kImportProgressEvery == 0 && !imu.eof()) {
-          report_progress(imu, imu_size, result.imu.rows, options.progress);
-        }
-        return std::nullopt;
-      },
-      result.imu.skipped);
-  if (!recording.begun()) throw std::invalid_argument(no_rows_message(result.imu));
-  if (options.progress) options.progress({.bytes_read = imu_size, .bytes_total = imu_size, .samples = result.imu.rows});
-
+                         result, problems.clipped);
+  read_imu(imu, options, recording, result, problems.imu_skipped);
   recording.finish();
-  const std::int64_t link = recording.link(), last_t = recording.last_t();
   for (const auto& row : reference_rows) store.append_reference(result.session, row);
-  record_import_events(store, result, link, last_t);
-  result.gaps =
-      recording.samples().record_gaps(store, result.session, link, options.gap_threshold_s, recording.first_t());
-  result.axes = recording.samples().resolve_axes(declared_axes);
-  if (result.axes.mismatch) {
-    store.append_event(result.session, {.link_id = link,
-                                        .mono_ns = last_t,
-                                        .wall_ns = last_t,
-                                        .kind = "imu_axes_mismatch",
-                                        .detail = *result.axes.mismatch});
-  }
-  pipeline::end_recorded_session(store, result.session, last_t);
+  report_problems(recording, result, problems);
+  const std::int64_t last_t = recording.last_t();
+  ImportChecks checks =
+      recording.session().end(recording.samples(), options.gap_threshold_s, recording.first_t(), declared_axes,
+                              {.link = recording.session().link(), .mono_ns = last_t, .wall_ns = last_t}, last_t);
+  result.gaps = std::move(checks.gaps);
+  result.axes = std::move(checks.axes);
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <functional>
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct ImportProgress {
   std::uint64_t bytes_read = 0;   // of the file being imported, never decreasing between calls
@@ -18,4 +18,4 @@ using ImportProgressCallback = std::function<void(const ImportProgress&)>;
 
 inline constexpr std::size_t kImportProgressEvery = 4096;
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

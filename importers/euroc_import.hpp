@@ -9,13 +9,13 @@
 #include <string_view>
 
 #include "estimator/imu_axes.hpp"
+#include "importers/import_problem.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "protocol/calibration.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
-#include "replay/text_table.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 enum class ReferenceFormat {
   tum,       // "t x y z qx qy qz qw", t in seconds, space separated: positions only
@@ -42,20 +42,21 @@ struct EurocImportOptions {
   double gap_threshold_s = kDefaultGapThresholdS;  // the IMU stopping for longer is a `gap` event
   // Hears how far reading the IMU file (mav0/imu0/data.csv) is. Optional.
   ImportProgressCallback progress{};
+  // Hears each reason rows were skipped or clipped for, with their lines (ImportProblem). Optional.
+  ProblemCallback on_problem{};
 };
 
 struct ImportedFile {
   std::filesystem::path path;
   std::uint64_t rows = 0;  // rows imported
-  LinesByReason skipped{};
 };
 
+// What the import made; what it skipped or clipped went to `on_problem`.
 struct EurocImportResult {
   std::int64_t session = 0;
   ImportedFile imu;
   std::optional<ImportedFile> reference;
   bool velocity_derived = false;   // the reference had positions only: velocity_from_positions() supplied it
-  LinesByReason clipped;           // IMU rows imported with a value clipped to the frame's range
   estimator::AxesResolution axes;  // the declared axes checked against gravity in the imported rows
   Gaps gaps;                       // holes in the IMU's data
 };
@@ -64,10 +65,10 @@ struct EurocImportResult {
 // no magnetometer or temperature: their counts are 0 (they decode as 0 uT, 0 C).
 protocol::Calibration import_calibration(double accel_lsb, double gyro_lsb);
 
-// Skipped rows and clipped values are also recorded as events of kind "import_skipped" and "import_clipped", holes
-// in the IMU's data as "gap" events, and
-// declared axes that gravity contradicts as one of kind "imu_axes_mismatch". Throws std::invalid_argument, before
-// writing anything, when a file is missing or has no usable row, or the IMU axes do not parse.
+// Skipped rows and clipped values are problems (on_problem, and events of kind "import_skipped" and
+// "import_clipped"), holes in the IMU's data "gap" events, and declared axes that gravity contradicts as one of kind
+// "imu_axes_mismatch". Throws std::invalid_argument, before writing anything, when a file is missing or has no usable
+// row, or the IMU axes do not parse.
 EurocImportResult import_euroc(store::Store& store, const EurocImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,4 +1,4 @@
-#include "replay/ulog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,10 +11,10 @@
 #include <utility>
 #include <vector>
 
-#include "replay/log_import.hpp"
-#include "replay/ulog.hpp"
+#include "importers/log_import.hpp"
+#include "importers/ulog.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 // PX4 marks a relative timestamp whose sensor had no new sample with INT32_MAX.
@@ -58,7 +58,8 @@ std::vector<ImuRow> from_accel_and_gyro(const ulog::Topic& accel_topic, const ul
     const auto v = vec3(accel_topic, i, *a);
     if (finite(v) && (accel.empty() || t > accel.back().first)) accel.emplace_back(t, v);
   }
-  for (std::size_t i = 0; i < gyro_topic.size(); ++i) gyro.emplace_back(gyro_topic.timestamp(i), vec3(gyro_topic, i, *g));
+  for (std::size_t i = 0; i < gyro_topic.size(); ++i)
+    gyro.emplace_back(gyro_topic.timestamp(i), vec3(gyro_topic, i, *g));
   return pair_accel_with_gyro(accel, gyro, skipped);
 }
 
@@ -185,8 +186,9 @@ nlohmann::json metadata(const ulog::Log& log, const UlogImportOptions& options, 
 }  // namespace
 
 UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& options) {
-  const ImuLogSettings settings = imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes,
-                                                   options.gap_threshold_s, options.progress, options.file);
+  const ImuLogSettings settings =
+      imu_log_settings(options.accel_lsb, options.gyro_lsb, options.imu_axes, options.gap_threshold_s, options.progress,
+                       options.file, options.on_problem);
   const ulog::Log log = ulog::read_file(options.file, options.progress);
   const std::string file = options.file.string();
 
@@ -215,7 +217,8 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
 
   for (const auto& s : log.strings) {
     imported.events.push_back(
-        {s.timestamp_us, "log", level_name(s.level) + (s.tag ? " (tag " + std::to_string(*s.tag) + ")" : "") + ": " + s.text});
+        {s.timestamp_us, "log",
+         level_name(s.level) + (s.tag ? " (tag " + std::to_string(*s.tag) + ")" : "") + ": " + s.text});
     ++result.log_events;
   }
   for (const auto& d : log.dropouts) {
@@ -237,4 +240,4 @@ UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& optio
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

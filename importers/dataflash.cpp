@@ -1,4 +1,4 @@
-#include "replay/dataflash.hpp"
+#include "importers/dataflash.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -7,9 +7,9 @@
 #include <utility>
 #include <variant>
 
-#include "replay/file_bytes.hpp"
+#include "importers/file_bytes.hpp"
 
-namespace imubridge::replay::dataflash {
+namespace imubridge::importers::dataflash {
 namespace {
 
 template <typename T>
@@ -352,4 +352,4 @@ Log read_file(const std::filesystem::path& path, const ImportProgressCallback& p
   }
 }
 
-}  // namespace imubridge::replay::dataflash
+}  // namespace imubridge::importers::dataflash

@@ -11,23 +11,26 @@
 #include <vector>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
+#include "importers/import_problem.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct UlogImportOptions {
   std::filesystem::path file;
   // The frames' resolution: +-164 m/s^2 (an MPU9250's +-16 g) and +-36 rad/s (its +-2000 deg/s) as int16 counts.
-  double accel_lsb = 5e-3;       // m/s^2 per count
-  double gyro_lsb = 1.1e-3;      // rad/s per count
-  std::string imu_axes = "frd";  // PX4 reports its IMU in the body's FRD axes
-  bool reference = true;         // vehicle_attitude + vehicle_local_position into the reference table
+  double accel_lsb = 5e-3;                         // m/s^2 per count
+  double gyro_lsb = 1.1e-3;                        // rad/s per count
+  std::string imu_axes = "frd";                    // PX4 reports its IMU in the body's FRD axes
+  bool reference = true;                           // vehicle_attitude + vehicle_local_position into the reference table
   double gap_threshold_s = kDefaultGapThresholdS;  // the IMU stopping for longer is a `gap` event
   // Hears how far the import is: the file's bytes while it is parsed, then the samples as they are recorded (at
   // bytes_read == bytes_total). Optional.
   ImportProgressCallback progress{};
+  // Hears each record skipped, value clipped and stretch damaged (ImportProblem). Optional.
+  ProblemCallback on_problem{};
 };
 
 struct UlogImportResult : ImuLogImportResult {
@@ -49,4 +52,4 @@ struct UlogImportResult : ImuLogImportResult {
 // as a ULog, has no IMU topic with a usable record, or the options are invalid.
 UlogImportResult import_ulog(store::Store& store, const UlogImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

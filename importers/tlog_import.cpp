@@ -1,9 +1,8 @@
-#include "replay/tlog_import.hpp"
+#include "importers/tlog_import.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -17,15 +16,13 @@
 #include <variant>
 #include <vector>
 
+#include "importers/euroc_import.hpp"
+#include "importers/import_session.hpp"
+#include "importers/tlog.hpp"
 #include "pipeline/mavlink_reference.hpp"
-#include "pipeline/record_and_decode.hpp"
-#include "pipeline/recorded_session.hpp"
-#include "pipeline/session_engine.hpp"
 #include "protocol/mavlink.hpp"
-#include "replay/euroc_import.hpp"
-#include "replay/tlog.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace mavlink = protocol::mavlink;
@@ -294,95 +291,84 @@ std::string no_imu_message(const std::string& file, const tlog::Log& log, const 
   return file + ": " + why + (log.damage.empty() ? "" : "; the file is damaged: " + *log.damage_summary());
 }
 
-// Every IMU's messages, those of the IMUs not imported as skipped, and the imported one's clipped values.
-void count_imus(const Survey& s, const mavlink::ImuSource& imu, bool raw_calibrated, TlogImportResult& result) {
+// Messages of the IMUs not imported (by IMU and why), and of the one imported those with a value at its field's end.
+struct ImuProblems {
+  std::map<std::string, std::uint64_t> skipped;
+  std::uint64_t clipped = 0;
+};
+
+// Every IMU's messages into the result; those of the IMUs not imported, and the imported one's clipped values.
+ImuProblems count_imus(const Survey& s, const mavlink::ImuSource& imu, bool raw_calibrated, TlogImportResult& result) {
+  ImuProblems problems;
   result.imu_source = mavlink::describe(imu);
   for (const auto& [source, count] : s.imus) {
     result.imu_messages[mavlink::describe(source)] = count;
     if (source == imu) continue;
     const bool raw_without = source.msgid == mavlink::RawImu::kId && !raw_calibrated;
-    result.skipped[mavlink::describe(source) + (raw_without ? ": RAW_IMU counts without --accel-lsb and --gyro-lsb"
-                                                            : ": not the IMU imported")] += count;
+    problems.skipped[mavlink::describe(source) + (raw_without ? ": RAW_IMU counts without --accel-lsb and --gyro-lsb"
+                                                              : ": not the IMU imported")] += count;
   }
-  if (const auto c = s.clipped.find(imu); c != s.clipped.end()) result.clipped = c->second;
+  if (const auto c = s.clipped.find(imu); c != s.clipped.end()) problems.clipped = c->second;
+  return problems;
 }
 
 void describe_log(const tlog::Log& log, TlogImportResult& result) {
   result.records = log.records.size();
   result.unverified = log.unverified;
   result.unverified_summary = log.unverified_summary();
-  result.damage = log.damage_summary();
-  result.damaged_bytes = log.damaged_bytes();
   result.first_us = log.records.front().time_us;
   result.last_us = log.records.back().time_us;
 }
 
-// Every frame through the session engine without estimation (an import has no parameters: a replay estimates), the
-// link finished at the last record; the reference's rows counted as its recorder built them.
-ImportedSamples record_frames(store::Store& store, const tlog::Log& log, const std::vector<std::int64_t>& mono_ns,
-                              pipeline::RecordedSession& recorded, const TlogImportOptions& options,
-                              TlogImportResult& result) {
-  const pipeline::LinkRecorder& recorder = *recorded.recorders[0];
-  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
-  pipeline::SessionEngine engine(nullptr);
+// Every frame fed to the session, the link finished at the last record; the reference's rows counted as its
+// recorder built them.
+ImportedSamples record_frames(ImportSession& session, const tlog::Log& log, const std::vector<std::int64_t>& mono_ns,
+                              const TlogImportOptions& options, TlogImportResult& result) {
   SamplesSink sink(mono_ns.front());
-  engine.add_sink(sink);
+  session.add_sink(sink);
+  const auto progress = [&](std::uint64_t bytes_read) {
+    options.progress({.bytes_read = bytes_read, .bytes_total = log.bytes.size(), .samples = sink.samples.t.size()});
+  };
   for (std::size_t i = 0; i < log.records.size(); ++i) {
-    engine.on_chunk(0, recording, log.frame(log.records[i]), mono_ns[i], ns(log.records[i].time_us));
-    store.commit_if_due(std::chrono::steady_clock::now());
+    session.feed(log.frame(log.records[i]), mono_ns[i], ns(log.records[i].time_us));
     if (options.progress && (i + 1) % kImportProgressEvery == 0) {
-      options.progress({.bytes_read = log.records[i].offset + tlog::kTimeSize + log.records[i].size,
-                        .bytes_total = log.bytes.size(),
-                        .samples = sink.samples.t.size()});
+      progress(log.records[i].offset + tlog::kTimeSize + log.records[i].size);
     }
   }
-  if (options.progress) {
-    options.progress(
-        {.bytes_read = log.bytes.size(), .bytes_total = log.bytes.size(), .samples = sink.samples.t.size()});
-  }
-  engine.finish_link(0, recording, mono_ns.back(), ns(log.records.back().time_us));
-  engine.finish();
+  if (options.progress) progress(log.bytes.size());
+  session.finish_link(mono_ns.back(), ns(log.records.back().time_us));
   result.samples = sink.samples.t.size();
-  if (const pipeline::MavlinkReference* built = recorder.mavlink_reference()) {
+  if (const pipeline::MavlinkReference* built = session.recorder().mavlink_reference()) {
     result.reference_rows = built->rows();
-    result.reference_skipped = built->skipped();
   }
   if (result.reference_rows == 0) result.reference_source.clear();
   return std::move(sink.samples);
 }
 
 // Events at a record's time: the session's clock and the log's wall clock there.
-struct RecordEvents {
-  store::Store& store;
-  std::int64_t session;
+struct RecordTimes {
   const tlog::Log& log;
   const std::vector<std::int64_t>& mono_ns;
 
-  void operator()(std::optional<std::int64_t> on, std::size_t record, std::string kind, std::int64_t count,
-                  std::string detail) const {
-    store.append_event(session, {.link_id = on,
-                                 .mono_ns = mono_ns[record],
-                                 .wall_ns = ns(log.records[record].time_us),
-                                 .kind = std::move(kind),
-                                 .count = count,
-                                 .detail = std::move(detail)});
+  EventAt operator()(std::optional<std::int64_t> on, std::size_t record) const {
+    return {.link = on, .mono_ns = mono_ns[record], .wall_ns = ns(log.records[record].time_us)};
   }
 };
 
 // The firmware's texts, then the log's own holes and its clock going back.
-void record_log_events(const RecordEvents& event, std::int64_t link, const Survey& s, TlogImportResult& result) {
+void record_log_events(ImportSession& session, const RecordTimes& at, const Survey& s, TlogImportResult& result) {
   for (const StatusText& t : s.strings) {
-    event(std::nullopt, t.record, "log", 1, severity_name(t.severity) + ": " + t.text);
+    session.log_event(at(std::nullopt, t.record), "log", severity_name(t.severity) + ": " + t.text);
     ++result.log_events;
   }
-  const tlog::Log& log = event.log;
+  const tlog::Log& log = at.log;
   for (std::size_t i = 1; i < log.records.size(); ++i) {
     const std::uint64_t before = log.records[i - 1].time_us, now = log.records[i].time_us;
     if (now > before + kTlogGapUs) {
       const double gap = static_cast<double>(now - before) * 1e-6;
       char text[96];
       std::snprintf(text, sizeof text, "no record in the log for %.1f s", gap);
-      event(link, i - 1, "log_gap", 1, text);
+      session.log_event(at(session.link(), i - 1), "log_gap", text);
       ++result.log_gaps;
       result.log_gap_s += gap;
     } else if (now < before) {
@@ -390,34 +376,58 @@ void record_log_events(const RecordEvents& event, std::int64_t link, const Surve
       std::snprintf(text, sizeof text,
                     "the log's time went back %.3f s (its clock set back?); the session's clock waits for it",
                     static_cast<double>(before - now) * 1e-6);
-      event(link, i, "log_time_back", 1, text);
+      session.log_event(at(session.link(), i), "log_time_back", text);
       ++result.time_back;
     }
   }
 }
 
+// Each damaged stretch where it lies: the records around it are imported.
+void report_damage(ImportSession& session, const RecordTimes& at, const std::string& file) {
+  for (const tlog::Damage& d : at.log.damage) {
+    const std::string where =
+        "at byte " + std::to_string(d.offset) +
+        (d.record == 0 ? ", before the first record" : ", after record " + std::to_string(d.record));
+    session.report({.kind = ProblemKind::damaged,
+                    .count = d.bytes,
+                    .what = "bytes of " + file,
+                    .why = d.what + "; the records around them are imported",
+                    .where = where},
+                   at(std::nullopt, d.record == 0 ? 0 : d.record - 1),
+                   file + ": " + std::to_string(d.bytes) + " bytes at byte " + std::to_string(d.offset) +
+                       " are no record (" + d.what + "); the records around them are imported");
+  }
+}
+
 // What the import left out or found clipped, at the last record; each damaged stretch where it lies.
-void record_import_events(const RecordEvents& event, std::int64_t link, const std::string& file,
-                          const TlogImportResult& result) {
-  const std::size_t last = event.log.records.size() - 1;
-  for (const auto& [reason, count] : result.skipped) {
-    event(link, last, "import_skipped", static_cast<std::int64_t>(count),
-          file + ": " + std::to_string(count) + " IMU messages: " + reason);
+void report_problems(ImportSession& session, const RecordTimes& at, const std::string& file, const ImuProblems& imu) {
+  const EventAt on_link = at(session.link(), at.log.records.size() - 1);
+  const EventAt on_session = at(std::nullopt, at.log.records.size() - 1);
+  for (const auto& [reason, count] : imu.skipped) {
+    session.report({.kind = ProblemKind::skipped, .count = count, .what = "IMU messages", .why = reason}, on_link,
+                   file + ": " + std::to_string(count) + " IMU messages: " + reason);
   }
-  for (const auto& [reason, count] : result.reference_skipped) {
-    event(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
-          file + ": " + std::to_string(count) + " reference rows: " + reason);
+  if (const pipeline::MavlinkReference* built = session.recorder().mavlink_reference()) {
+    for (const auto& [reason, count] : built->skipped()) {
+      session.report({.kind = ProblemKind::skipped, .count = count, .what = "reference rows", .why = reason},
+                     on_session, file + ": " + std::to_string(count) + " reference rows: " + reason);
+    }
   }
-  if (result.clipped > 0) {
-    event(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
-          file + ": " + std::to_string(result.clipped) +
-              " samples with a value at the end of its field's range (clipped by the sender?)");
+  if (imu.clipped > 0) {
+    const std::string why = "a value at the end of its field's range (clipped by the sender?)";
+    session.report({.kind = ProblemKind::clipped, .count = imu.clipped, .what = "samples", .why = why}, on_link,
+                   file + ": " + std::to_string(imu.clipped) + " samples with " + why);
   }
-  for (const tlog::Damage& d : event.log.damage) {
-    event(std::nullopt, d.record == 0 ? 0 : d.record - 1, "import_damaged", static_cast<std::int64_t>(d.bytes),
-          file + ": " + std::to_string(d.bytes) + " bytes at byte " + std::to_string(d.offset) + " are no record (" +
-              d.what + "); the records around them are imported");
-  }
+  report_damage(session, at, file);
+}
+
+// The session's start: its source, the metadata, the link of the log's frames with the IMU and the reference chosen.
+pipeline::SessionStart session_start(const tlog::Log& log, const Survey& s, const TlogImportOptions& options,
+                                     const mavlink::ImuSource& imu, const TlogImportResult& result) {
+  return {.kind = "import",
+          .source = "MAVLink telemetry log " + options.file.string(),
+          .config = metadata(log, s, options, imu, result.reference_source),
+          .started_wall_ns = ns(result.first_us)};
 }
 
 }  // namespace
@@ -434,34 +444,30 @@ TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& optio
   const Survey s = survey(log);
   const std::optional<mavlink::ImuSource> imu = choose_imu(s, options, raw_calibrated);
   if (!imu) throw std::invalid_argument(no_imu_message(file, log, s, options, raw_calibrated));
-  count_imus(s, *imu, raw_calibrated, result);
+  const ImuProblems imu_problems = count_imus(s, *imu, raw_calibrated, result);
   // The reference rows are built as the frames are recorded, by the recorder (as on a live link).
   std::optional<pipeline::MavlinkReference::Choice> reference;
   if (options.reference) reference = reference_choice(s, Component{imu->sysid, imu->compid});
   if (reference) result.reference_source = pipeline::MavlinkReference(*reference).source();
   describe_log(log, result);
 
-  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
-      store,
-      {.kind = "import",
-       .source = "MAVLink telemetry log " + file,
-       .config = metadata(log, s, options, *imu, result.reference_source),
-       .started_wall_ns = ns(result.first_us)},
-      {{.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
-        .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source,
-        .mavlink_reference = reference}});
-  result.session = recorded.id;
-  const std::int64_t link = recorded.store_links[0];
-  const ImportedSamples samples = record_frames(store, log, mono_ns, recorded, options, result);
+  ImportSession session(store, session_start(log, s, options, *imu, result),
+                        {.recorded = {"telemetry", protocol::WireFormat::mavlink, calibration, options.imu_axes, *imu},
+                         .device = "MAVLink telemetry log " + file + ", samples from " + result.imu_source,
+                         .mavlink_reference = reference},
+                        options.on_problem);
+  result.session = session.id();
+  const ImportedSamples samples = record_frames(session, log, mono_ns, options, result);
 
-  const RecordEvents event{.store = store, .session = result.session, .log = log, .mono_ns = mono_ns};
-  record_log_events(event, link, s, result);
-  record_import_events(event, link, file, result);
-  result.gaps = samples.record_gaps(store, result.session, link, options.gap_threshold_s, mono_ns.front());
-  result.axes = samples.resolve_axes(declared_axes);
-  if (result.axes.mismatch) event(link, log.records.size() - 1, "imu_axes_mismatch", 1, *result.axes.mismatch);
-  pipeline::end_recorded_session(store, result.session, std::max(ns(log.records.back().time_us), ns(result.first_us)));
+  const RecordTimes at{.log = log, .mono_ns = mono_ns};
+  record_log_events(session, at, s, result);
+  report_problems(session, at, file, imu_problems);
+  ImportChecks checks = session.end(samples, options.gap_threshold_s, mono_ns.front(), declared_axes,
+                                    at(session.link(), log.records.size() - 1),
+                                    std::max(ns(log.records.back().time_us), ns(result.first_us)));
+  result.gaps = std::move(checks.gaps);
+  result.axes = std::move(checks.axes);
   return result;
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -3,7 +3,8 @@
 // link of wire format mavlink, received at the record's time, so the session holds exactly the bytes a live MAVLink
 // link would have received and replay decodes them as it would; the link's samples come from one IMU (the one sending
 // the most messages), LOCAL_POSITION_NED with ATTITUDE_QUATERNION (else ATTITUDE) is the reference trajectory,
-// STATUSTEXT, gaps in the log's time, holes in the IMU's samples and damage are events. docs/replay.md, "MAVLink telemetry logs".
+// STATUSTEXT, gaps in the log's time, holes in the IMU's samples and damage are events. docs/replay.md, "MAVLink
+// telemetry logs".
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -11,11 +12,12 @@
 #include <string>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
-#include "replay/log_import.hpp"
+#include "importers/import_problem.hpp"
+#include "importers/import_progress.hpp"
+#include "importers/log_import.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 struct TlogImportOptions {
   std::filesystem::path file;
@@ -29,29 +31,27 @@ struct TlogImportOptions {
   double gap_threshold_s = kDefaultGapThresholdS;  // the IMU stopping for longer is a `gap` event
   // Hears how far the recording of the file's records is (bytes up to the end of the last record recorded). Optional.
   ImportProgressCallback progress{};
+  // Hears each message skipped, value clipped and stretch damaged (ImportProblem). Optional.
+  ProblemCallback on_problem{};
 };
 
+// What a tlog's import made; what it skipped, clipped or found damaged went to `on_problem`.
 struct TlogImportResult {
   std::int64_t session = 0;
   std::string imu_source;                             // protocol::mavlink::describe() of the IMU imported
   std::map<std::string, std::uint64_t> imu_messages;  // every IMU in the log (as imu_source says it): its messages
   std::uint64_t samples = 0;                          // IMU samples imported
-  std::map<std::string, std::uint64_t> skipped;       // IMU messages that gave no sample, by reason
-  std::uint64_t clipped = 0;     // samples with a value at the end of its int16 field's range: clipped by the sender?
-  std::uint64_t records = 0;     // records read (each one frame, a chunk of the link)
-  std::uint64_t unverified = 0;  // of them, valid frames nothing here can check (kept as they are)
-  std::optional<std::string> unverified_summary;  // what they are: unknown ids, known ids of another layout
-  std::string reference_source;  // "LOCAL_POSITION_NED + ATTITUDE_QUATERNION", ... ; empty: none
+  std::uint64_t records = 0;                          // records read (each one frame, a chunk of the link)
+  std::uint64_t unverified = 0;                       // of them, valid frames nothing here can check (kept as they are)
+  std::optional<std::string> unverified_summary;      // what they are: unknown ids, known ids of another layout
+  std::string reference_source;                       // "LOCAL_POSITION_NED + ATTITUDE_QUATERNION", ... ; empty: none
   std::uint64_t reference_rows = 0;
-  std::map<std::string, std::uint64_t> reference_skipped;
   std::uint64_t log_events = 0;             // STATUSTEXT messages
   std::uint64_t log_gaps = 0;               // stretches without a record over kTlogGapUs
   double log_gap_s = 0;                     // their length, summed
   Gaps gaps;                                // holes in the imported IMU's samples
   std::uint64_t time_back = 0;              // records stamped before the one before them
   std::uint64_t first_us = 0, last_us = 0;  // the first and last record's times, µs since the UNIX epoch
-  std::optional<std::string> damage;        // the damage the reader skipped: what and where
-  std::uint64_t damaged_bytes = 0;
   estimator::AxesResolution axes;
 };
 
@@ -62,4 +62,4 @@ inline constexpr std::uint64_t kTlogGapUs = 2'000'000;
 // as a tlog, holds no IMU message that gives samples, or the options are invalid.
 TlogImportResult import_tlog(store::Store& store, const TlogImportOptions& options);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

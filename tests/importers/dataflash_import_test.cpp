@@ -2,7 +2,7 @@
 // a newer one timed in µs with FMTU, UNIT and MULT, IMU instances by name and by I field, ACC and GYR faster than
 // IMU), damage (a truncated record, a corrupt header byte, a type no FMT defines), the import's samples, reference,
 // events, parameters and holes, and the real ArduCopter flight log171.bin from ../shared/data/dataflash when present.
-#include "replay/dataflash_import.hpp"
+#include "importers/dataflash_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,15 +14,17 @@
 #include <nlohmann/json.hpp>
 #include <variant>
 
-#include "replay/dataflash.hpp"
-#include "replay/log_import.hpp"
+#include "importers/dataflash.hpp"
+#include "importers/log_import.hpp"
+#include "tests/support/reported_problems.hpp"
 #include "tests/support/stored_rows.hpp"
 #include "tests/support/temp_dir.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
+using test::ReportedProblems;
 using test::session_config;
 using test::stored_events;
 using test::stored_reference;
@@ -203,7 +205,7 @@ class DataflashImport : public ::testing::Test {
   }
 };
 
-// The holes every log importer records (replay/log_import.hpp): over the threshold only, between any two times a log
+// The holes every log importer records (importers/log_import.hpp): over the threshold only, between any two times a log
 // may hold (euroc_fuzz found 2^63-1 after -5 overflowing the difference).
 TEST(LogImportGaps, FindsTheHolesOverTheThresholdBetweenAnyTimes) {
   const std::vector<std::int64_t> t{0, 100'000'000, 1'200'000'000, 1'300'000'000};
@@ -343,17 +345,17 @@ TEST(DataflashReader, ReadsUpToTheDamage) {
 
 TEST_F(DataflashImport, SamplesReferenceEventsParametersAndHolesOfAnOlderLog) {
   store::Store store(dir_ / "import.db");
-  const auto r = import_dataflash(store, {.file = write(old_log().bytes)});
+  ReportedProblems problems;
+  const auto r = import_dataflash(store, {.file = write(old_log().bytes), .on_problem = problems.callback()});
   EXPECT_EQ(r.instance, 0u);
   EXPECT_EQ(r.imu_source, "IMU");
   EXPECT_EQ(r.imus.at(0), "IMU: 100");
   EXPECT_EQ(r.imus.at(1), "IMU2: 100");
   EXPECT_EQ(r.samples, kOldSamples);
-  EXPECT_TRUE(r.skipped.empty());
+  EXPECT_TRUE(problems.all.empty());
   EXPECT_EQ(r.first_us, kOldT0Ms * 1000ull);
   EXPECT_EQ(r.last_us, 12'980'000u);
   EXPECT_FALSE(r.axes.mismatch);
-  EXPECT_FALSE(r.damage);
 
   const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), kOldSamples);
@@ -487,16 +489,21 @@ TEST_F(DataflashImport, ImportsADamagedLogUpToTheDamageAndSaysSo) {
   bytes[at] = 0x00;
   store::Store store(dir_ / "import.db");
   const fs::path file = write(bytes);
-  const auto r = import_dataflash(store, {.file = file});
-  ASSERT_TRUE(r.damage);
-  EXPECT_EQ(*r.damage, "at byte " + std::to_string(at) + ": no record header (0xA3 0x95) but 0x00 0x95");
+  ReportedProblems problems;
+  const auto r = import_dataflash(store, {.file = file, .on_problem = problems.callback()});
+  const std::string damage = "at byte " + std::to_string(at) + ": no record header (0xA3 0x95) but 0x00 0x95";
+  EXPECT_EQ(problems.all,
+            (std::vector<importers::ImportProblem>{{.kind = ProblemKind::damaged,
+                                                    .count = 1,
+                                                    .what = "stretch of " + file.string(),
+                                                    .why = damage + "; everything before it is imported"}}));
   EXPECT_GT(r.samples, 10u);
   EXPECT_LT(r.samples, kOldSamples);
   EXPECT_EQ(stored_samples(store, r.session).size(), r.samples);
   const auto damaged = stored_events(store, r.session, "import_damaged");
   ASSERT_EQ(damaged.size(), 1u);
   EXPECT_EQ(damaged[0].detail,
-            file.string() + ": read up to the damage, " + *r.damage + "; everything before it is imported");
+            file.string() + ": read up to the damage, " + damage + "; everything before it is imported");
 }
 
 // ../shared/data/dataflash/log171.bin: an ArduCopter 3.3 flight of about 243 s in LOITER (SOURCE.md there).
@@ -504,15 +511,14 @@ TEST_F(DataflashImport, TheArduCopterFlightLog171) {
   const fs::path path = kShared / "log171.bin";
   if (!fs::exists(path)) GTEST_SKIP() << "no " << path << " (the real ArduCopter log is in ../shared only)";
   store::Store store(dir_ / "log171.db");
-  const auto r = import_dataflash(store, {.file = path});
-  EXPECT_FALSE(r.damage);
+  ReportedProblems problems;
+  const auto r = import_dataflash(store, {.file = path, .on_problem = problems.callback()});
+  EXPECT_TRUE(problems.all.empty());
   EXPECT_EQ(r.imu_source, "IMU");
   EXPECT_EQ(r.imus.at(0), "IMU: 11916");
   EXPECT_EQ(r.imus.at(1), "IMU2: 11916");
   EXPECT_EQ(r.imus.at(2), "IMU3: 11916");
   EXPECT_EQ(r.samples, 11916u);
-  EXPECT_TRUE(r.skipped.empty());
-  EXPECT_EQ(r.clipped, 0u);
   const double span_s = static_cast<double>(r.last_us - r.first_us) * 1e-6;
   EXPECT_GT(span_s, 230);
   EXPECT_LT(span_s, 250);
@@ -552,4 +558,4 @@ TEST_F(DataflashImport, TheArduCopterFlightLog171) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,7 +1,7 @@
 // PX4 ULog: the reader on a file built here message by message (nested formats, padding, every message type,
 // appended data, truncation and corrupt definitions), the import's samples, reference and events, and the PX4
 // sample logs of pyulog (tests/data/ulog, and sample.ulg from ../shared/data/ulog when present).
-#include "replay/ulog_import.hpp"
+#include "importers/ulog_import.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -13,13 +13,15 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "replay/ulog.hpp"
+#include "importers/ulog.hpp"
+#include "tests/support/reported_problems.hpp"
 #include "tests/support/stored_rows.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
+using test::ReportedProblems;
 using test::session_config;
 using test::stored_events;
 using test::stored_reference;
@@ -269,10 +271,12 @@ TEST(UlogReader, ReadsATruncatedFileUpToTheDamage) {
 
 TEST_F(UlogImport, SamplesReferenceEventsAndMetadata) {
   store::Store store(dir_ / "import.db");
-  const auto r = import_ulog(store, {.file = write(synthetic().bytes)});
+  ReportedProblems problems;
+  const auto r = import_ulog(store, {.file = write(synthetic().bytes), .on_problem = problems.callback()});
   EXPECT_EQ(r.imu_source, "sensor_combined");
   EXPECT_EQ(r.samples, 100u);
-  EXPECT_EQ(r.skipped.at("no accelerometer sample (relative timestamp invalid)"), 1u);
+  EXPECT_EQ(problems.counts(ProblemKind::skipped, "sensor_combined records"),
+            (std::map<std::string, std::uint64_t>{{"no accelerometer sample (relative timestamp invalid)", 1}}));
   EXPECT_EQ(r.first_us, kT0);
   EXPECT_EQ(r.last_us, kT0 + 400'000);
   EXPECT_TRUE(r.data_appended);
@@ -294,7 +298,8 @@ TEST_F(UlogImport, SamplesReferenceEventsAndMetadata) {
   const auto ref = stored_reference(store, r.session);
   EXPECT_EQ(r.reference_rows, 19u);
   ASSERT_EQ(ref.size(), 19u);
-  EXPECT_EQ(r.reference_skipped.at("horizontal position not valid (xy_valid false)"), 1u);
+  EXPECT_EQ(
+      problems.counts(ProblemKind::skipped, "reference rows").at("horizontal position not valid (xy_valid false)"), 1u);
   EXPECT_EQ(ref[0].t_ns, static_cast<std::int64_t>(kT0 + 5000) * 1000);
   EXPECT_NEAR(ref[0].quat_wxyz[0], std::cos(0.0025), 1e-6);  // halfway between yaw 0 and 0.01
   EXPECT_NEAR(ref[0].quat_wxyz[3], std::sin(0.0025), 1e-6);
@@ -331,10 +336,18 @@ TEST_F(UlogImport, NoReferenceWhenAskedAndAxesAsDeclared) {
 TEST_F(UlogImport, ImportsATruncatedFileUpToTheDamageAndSaysSo) {
   const Writer w = synthetic();
   store::Store store(dir_ / "import.db");
-  const auto r = import_ulog(store, {.file = write({w.bytes.begin(), w.bytes.begin() + w.bytes.size() * 3 / 4})});
-  ASSERT_TRUE(r.damage);
+  ReportedProblems problems;
+  const fs::path cut = write({w.bytes.begin(), w.bytes.begin() + w.bytes.size() * 3 / 4});
+  const auto r = import_ulog(store, {.file = cut, .on_problem = problems.callback()});
+  const auto damage = problems.of(ProblemKind::damaged);
+  ASSERT_EQ(damage.size(), 1u);
+  EXPECT_EQ(damage[0].count, 1u);
+  EXPECT_EQ(damage[0].what, "stretch of " + cut.string());
+  EXPECT_NE(damage[0].why.find("cut short"), std::string::npos) << damage[0].why;
+  EXPECT_TRUE(damage[0].why.ends_with("; everything before it is imported")) << damage[0].why;
   EXPECT_GT(r.samples, 40u);
   EXPECT_LT(r.samples, 100u);
+  EXPECT_EQ(stored_samples(store, r.session).size(), r.samples);  // every good record before the damage
   const auto damaged = stored_events(store, r.session, "import_damaged");
   ASSERT_EQ(damaged.size(), 1u);
   EXPECT_NE(damaged[0].detail.find("cut short"), std::string::npos);
@@ -399,7 +412,8 @@ TEST_F(UlogImport, AHoleInARealLogIsAGapEvent) {
   EXPECT_EQ(gap[0].mono_ns, hole.from_ns);
   EXPECT_TRUE(gap[0].detail.starts_with("no IMU sample for 3")) << gap[0].detail;
   const auto s = stored_samples(store, r.session);
-  EXPECT_TRUE(std::any_of(s.begin(), s.end(), [&](const protocol::Sample& x) { return x.recv_mono_ns > hole.from_ns; }));
+  EXPECT_TRUE(
+      std::any_of(s.begin(), s.end(), [&](const protocol::Sample& x) { return x.recv_mono_ns > hole.from_ns; }));
 }
 
 TEST_F(UlogImport, ThePx4SampleLogs) {
@@ -422,11 +436,13 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
     }
 
     store::Store store(dir_ / (std::string(e.file) + ".db"));
-    const auto r = import_ulog(store, {.file = path});
+    ReportedProblems problems;
+    const auto r = import_ulog(store, {.file = path, .on_problem = problems.callback()});
     EXPECT_EQ(r.imu_source, "sensor_combined");
     EXPECT_EQ(r.samples, e.samples);
-    EXPECT_TRUE(r.skipped.empty());
-    EXPECT_EQ(r.clipped, 0u);
+    EXPECT_TRUE(problems.of(ProblemKind::skipped, "sensor_combined").empty());
+    EXPECT_TRUE(problems.of(ProblemKind::clipped).empty());
+    EXPECT_TRUE(problems.of(ProblemKind::damaged).empty());
     EXPECT_EQ(r.first_us, e.first_us);
     EXPECT_EQ(r.last_us, e.last_us);
     EXPECT_EQ(r.dropouts, e.dropouts);
@@ -458,7 +474,9 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
     }
     // None of the three has a horizontal fix (bench and indoor logs: no GPS), so no reference row is true.
     EXPECT_EQ(r.reference_rows, 0u);
-    EXPECT_EQ(r.reference_skipped.at("horizontal position not valid (xy_valid false)"), e.local_positions);
+    EXPECT_EQ(
+        problems.counts(ProblemKind::skipped, "reference rows").at("horizontal position not valid (xy_valid false)"),
+        e.local_positions);
     EXPECT_EQ(stored_events(store, r.session, "dropout").size(), e.dropouts);
     EXPECT_EQ(stored_events(store, r.session, "log").size(), e.strings);
     const auto c = session_config(store, r.session).at("import");
@@ -471,4 +489,4 @@ TEST_F(UlogImport, ThePx4SampleLogs) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -16,9 +16,9 @@
 #include <string_view>
 #include <vector>
 
-#include "replay/import_progress.hpp"
+#include "importers/import_progress.hpp"
 
-namespace imubridge::replay::dataflash {
+namespace imubridge::importers::dataflash {
 
 inline constexpr std::uint8_t kHead1 = 0xA3, kHead2 = 0x95, kFmtType = 0x80;
 inline constexpr std::size_t kHeaderSize = 3;
@@ -85,4 +85,4 @@ struct Log {
 Log parse(std::span<const std::uint8_t> bytes, const ImportProgressCallback& progress = {});
 Log read_file(const std::filesystem::path& path, const ImportProgressCallback& progress = {});
 
-}  // namespace imubridge::replay::dataflash
+}  // namespace imubridge::importers::dataflash

@@ -5,10 +5,10 @@
 #include <optional>
 #include <vector>
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 // The whole of a regular file, in one read (a byte at a time through istreambuf_iterator cost as much as parsing
 // it); nullopt when `path` is not a regular file or cannot be read whole.
 std::optional<std::vector<std::uint8_t>> read_file_bytes(const std::filesystem::path& path);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,7 +1,7 @@
 // MAVLink telemetry logs: the reader on logs built here from a simulated flight with the project's own MAVLink
 // encoder (sim::MavlinkTelemetry), damaged and garbage files, and the import's samples, IMU choice, reference and
 // events against the simulator's truth.
-#include "replay/tlog_import.hpp"
+#include "importers/tlog_import.hpp"
 
 #include <gtest/gtest.h>
 
@@ -11,18 +11,20 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "importers/tlog.hpp"
 #include "protocol/mavlink.hpp"
 #include "replay/replayer.hpp"
-#include "replay/tlog.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
+#include "tests/support/reported_problems.hpp"
 #include "tests/support/stored_rows.hpp"
 #include "tests/support/temp_dir.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 namespace fs = std::filesystem;
+using test::ReportedProblems;
 using test::session_config;
 using test::stored_events;
 using test::stored_reference;
@@ -205,8 +207,9 @@ TEST_F(TlogImport, ValidFramesOfUnknownIdsAndLayoutsAreCountedAsSuchNotAsDamage)
                 ") of known ids at a MAVLink 1 length their message cannot have (another dialect or version)");
 
   store::Store store(dir_ / "import.db");
-  const auto r = import_tlog(store, {.file = write(f.tlog)});
-  EXPECT_FALSE(r.damage);
+  ReportedProblems problems;
+  const auto r = import_tlog(store, {.file = write(f.tlog), .on_problem = problems.callback()});
+  EXPECT_TRUE(problems.of(ProblemKind::damaged).empty());
   EXPECT_EQ(r.unverified, 2 * each);
   EXPECT_EQ(r.unverified_summary, log.unverified_summary());
   EXPECT_EQ(r.samples, f.samples.size());
@@ -221,13 +224,12 @@ TEST_F(TlogImport, ValidFramesOfUnknownIdsAndLayoutsAreCountedAsSuchNotAsDamage)
 TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
   const Flight f = fly(2.0);
   store::Store store(dir_ / "import.db");
-  const auto r = import_tlog(store, {.file = write(f.tlog)});
+  ReportedProblems problems;
+  const auto r = import_tlog(store, {.file = write(f.tlog), .on_problem = problems.callback()});
   EXPECT_EQ(r.imu_source, "HIGHRES_IMU id 0 from system 1, component 1");
   EXPECT_EQ(r.samples, f.samples.size());
   EXPECT_EQ(r.records, f.records);
-  EXPECT_TRUE(r.skipped.empty());
-  EXPECT_EQ(r.clipped, 0u);
-  EXPECT_FALSE(r.damage);
+  EXPECT_TRUE(problems.all.empty());
   EXPECT_FALSE(r.axes.mismatch);
   EXPECT_EQ(r.first_us, kEpochUs);
   EXPECT_EQ(r.reference_source, "LOCAL_POSITION_NED + ATTITUDE from system 1, component 1");
@@ -267,7 +269,7 @@ TEST_F(TlogImport, ASimulatedFlightGivesTheSimulatorsSamplesAndTruth) {
   EXPECT_EQ(c.at("links")[0].at("mavlink_imu").at("message"), "HIGHRES_IMU");
 
   // The stored chunks are the frames: replay decodes them as the import did.
-  const ReplayResult replayed = replay_session(store, r.session, {});
+  const replay::ReplayResult replayed = replay::replay_session(store, r.session, {});
   EXPECT_EQ(replayed.samples, f.samples.size());
 }
 
@@ -280,15 +282,19 @@ TEST_F(TlogImport, TheImuWithTheMostMessagesIsImportedAndTheOthersNamed) {
   });
   store::Store store(dir_ / "import.db");
   const std::uint64_t n = f.samples.size(), n2 = (n + 1) / 2, n3 = (n + 3) / 4;
-  const auto r = import_tlog(store, {.file = write(f.tlog)});
+  ReportedProblems problems;
+  const auto r = import_tlog(store, {.file = write(f.tlog), .on_problem = problems.callback()});
   EXPECT_EQ(r.imu_source, "HIGHRES_IMU id 0 from system 1, component 1");
   EXPECT_EQ(r.samples, n);
   EXPECT_EQ(r.imu_messages.at("SCALED_IMU2 from system 1, component 1"), n2);
-  EXPECT_EQ(r.skipped.at("SCALED_IMU2 from system 1, component 1: not the IMU imported"), n2);
-  EXPECT_EQ(r.skipped.at("SCALED_IMU3 from system 1, component 1: not the IMU imported"), n3);
+  const std::map<std::string, std::uint64_t> skipped{
+      {"SCALED_IMU2 from system 1, component 1: not the IMU imported", n2},
+      {"SCALED_IMU3 from system 1, component 1: not the IMU imported", n3}};
+  EXPECT_EQ(problems.counts(ProblemKind::skipped, "IMU messages"), skipped);
   EXPECT_EQ(stored_events(store, r.session, "import_skipped").size(), 2u);
   EXPECT_EQ(stored_samples(store, r.session).size(), n);
-  EXPECT_EQ(replay_session(store, r.session, {}).samples, n);  // not n + n2 + n3: the others stay out on replay too
+  EXPECT_EQ(replay::replay_session(store, r.session, {}).samples,
+            n);  // not n + n2 + n3: the others stay out on replay too
 
   const auto second = import_tlog(store, {.file = write(f.tlog), .imu_message = "SCALED_IMU2"});
   EXPECT_EQ(second.imu_source, "SCALED_IMU2 from system 1, component 1");
@@ -302,7 +308,7 @@ TEST_F(TlogImport, TheImuWithTheMostMessagesIsImportedAndTheOthersNamed) {
       EXPECT_NEAR(s[k].gyro[a], want.measured.gyro[a], 0.5e-3 + 1e-12) << k;
     }
   }
-  EXPECT_EQ(replay_session(store, second.session, {}).samples, n2);
+  EXPECT_EQ(replay::replay_session(store, second.session, {}).samples, n2);
 }
 
 TEST_F(TlogImport, RawImuOnlyWithItsResolutions) {
@@ -328,13 +334,15 @@ TEST_F(TlogImport, RawImuOnlyWithItsResolutions) {
   }
   EXPECT_TRUE(store.sessions().empty());
   EXPECT_THROW(import_tlog(store, {.file = write(f.tlog), .accel_lsb = 9.80665e-3}), std::invalid_argument);
-  const auto r = import_tlog(store, {.file = write(f.tlog), .accel_lsb = 9.80665e-3, .gyro_lsb = 1e-3});
+  ReportedProblems problems;
+  const auto r = import_tlog(
+      store, {.file = write(f.tlog), .accel_lsb = 9.80665e-3, .gyro_lsb = 1e-3, .on_problem = problems.callback()});
   EXPECT_EQ(r.imu_source, "RAW_IMU id 0 from system 1, component 1");
   const auto s = stored_samples(store, r.session);
   ASSERT_EQ(s.size(), f.samples.size());
   EXPECT_NEAR(s[5].accel[2], f.samples[5].measured.accel.z(), 0.5e-3 * 9.80665 + 1e-9);
   EXPECT_NEAR(s[5].gyro[0], f.samples[5].measured.gyro.x(), 0.5e-3 + 1e-9);
-  EXPECT_EQ(r.clipped, 0u);  // the magnetometer's range is no concern
+  EXPECT_TRUE(problems.of(ProblemKind::clipped).empty());  // the magnetometer's range is no concern
   EXPECT_TRUE(r.reference_source.empty());
   EXPECT_EQ(r.reference_rows, 0u);
 }
@@ -344,15 +352,21 @@ TEST_F(TlogImport, ATruncatedLogImportsWhatPrecedesTheDamageAndSaysSo) {
   const tlog::Log whole = tlog::parse(f.tlog);
   const std::size_t cut = whole.records[150].offset + 20;  // inside record 150
   store::Store store(dir_ / "import.db");
-  const auto r = import_tlog(store, {.file = write(Bytes(f.tlog.begin(), f.tlog.begin() + static_cast<long>(cut)))});
+  ReportedProblems problems;
+  const auto r = import_tlog(store, {.file = write(Bytes(f.tlog.begin(), f.tlog.begin() + static_cast<long>(cut))),
+                                     .on_problem = problems.callback()});
   EXPECT_EQ(r.records, 150u);
   std::uint64_t imu_records = 0;  // HIGHRES_IMU among the 150 records kept
   for (std::size_t i = 0; i < 150; ++i) imu_records += whole.frame(whole.records[i])[7] == mav::HighresImu::kId;
   EXPECT_GT(imu_records, 100u);
   EXPECT_EQ(r.samples, imu_records);
-  ASSERT_TRUE(r.damage);
-  EXPECT_NE(r.damage->find("the last record, cut short (20 bytes"), std::string::npos) << *r.damage;
-  EXPECT_EQ(r.damaged_bytes, 20u);
+  EXPECT_EQ(stored_samples(store, r.session).size(), imu_records);  // every good record before the damage
+  const auto damage = problems.of(ProblemKind::damaged);
+  ASSERT_EQ(damage.size(), 1u);
+  EXPECT_EQ(damage[0].count, 20u);
+  EXPECT_TRUE(damage[0].what.starts_with("bytes of ")) << damage[0].what;
+  EXPECT_TRUE(damage[0].why.starts_with("the last record, cut short (20 bytes")) << damage[0].why;
+  EXPECT_EQ(damage[0].where, "at byte " + std::to_string(whole.records[150].offset) + ", after record 150");
   const auto damaged = stored_events(store, r.session, "import_damaged");
   ASSERT_EQ(damaged.size(), 1u);
   EXPECT_EQ(damaged[0].count, 20);
@@ -433,4 +447,4 @@ TEST_F(TlogImport, NoReferenceWhenAskedAndAxesAsDeclared) {
 }
 
 }  // namespace
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,7 +1,6 @@
-#include "replay/log_import.hpp"
+#include "importers/log_import.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -11,13 +10,11 @@
 #include <string>
 #include <utility>
 
-#include "pipeline/record_and_decode.hpp"
-#include "pipeline/recorded_session.hpp"
-#include "pipeline/session_engine.hpp"
+#include "importers/euroc_import.hpp"
+#include "importers/import_session.hpp"
 #include "protocol/imu_frame.hpp"
-#include "replay/euroc_import.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 namespace {
 
 std::int64_t ns(std::uint64_t us) { return static_cast<std::int64_t>(us) * 1000; }
@@ -149,7 +146,8 @@ Eigen::Quaterniond attitude_from_euler(double roll, double pitch, double yaw) {
 }
 
 ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::string& imu_axes, double gap_threshold_s,
-                                const ImportProgressCallback& progress, const std::filesystem::path& file) {
+                                const ImportProgressCallback& progress, const std::filesystem::path& file,
+                                const ProblemCallback& on_problem) {
   if (!import_calibration(accel_lsb, gyro_lsb).valid() || !(accel_lsb > 0) || !(gyro_lsb > 0)) {
     throw std::invalid_argument("the accelerometer and gyro resolutions must be positive and finite");
   }
@@ -160,91 +158,80 @@ ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::st
           .imu_axes = imu_axes,
           .gap_threshold_s = gap_threshold_s,
           .progress = progress,
-          .file_size = progress && std::filesystem::exists(file) ? std::filesystem::file_size(file) : 0};
+          .file_size = progress && std::filesystem::exists(file) ? std::filesystem::file_size(file) : 0,
+          .on_problem = on_problem};
 }
 
 namespace {
 
-// The session's events at log times; the session ends with the last of them, or its last sample.
-struct SessionEvents {
-  store::Store& store;
-  std::int64_t session = 0;
-  std::int64_t end = 0;
-
-  void add(std::optional<std::int64_t> on, std::int64_t t, std::string kind, std::int64_t count, std::string detail) {
-    store.append_event(session, {.link_id = on,
-                                 .mono_ns = t,
-                                 .wall_ns = t,
-                                 .kind = std::move(kind),
-                                 .count = count,
-                                 .detail = std::move(detail)});
-    end = std::max(end, t);
-  }
-};
-
 // What the log says of itself, into the result before anything is recorded.
-void take_log_summary(ImuLog& log, ImuLogImportResult& result) {
+void take_log_summary(const ImuLog& log, ImuLogImportResult& result) {
   result.imu_source = log.imu_source;
-  result.skipped = std::move(log.skipped);
-  result.reference_skipped = std::move(log.reference_skipped);
   result.reference_rows = log.reference.size();
-  result.damage = log.damage;
   result.first_us = log.rows.front().t_us;
   result.last_us = log.rows.back().t_us;
 }
 
-// Every row, encoded as a frame, through the session engine without estimation, and the link finished at the last;
-// the samples and values clipped to the frame's range counted.
-ImportedSamples record_rows(store::Store& store, const std::vector<ImuRow>& rows, pipeline::RecordAndDecode& recording,
-                            const protocol::Calibration& calibration, const ImuLogSettings& settings,
-                            ImuLogImportResult& result) {
-  pipeline::SessionEngine engine(nullptr);
+// Every row, encoded as a frame at the settings' resolution, fed to the session; the link finished at the last. Returns
+// how many samples had a value beyond the frame's range (clipped to it).
+std::uint64_t record_rows(ImportSession& session, const std::vector<ImuRow>& rows,
+                          const protocol::Calibration& calibration, const ImuLogSettings& settings,
+                          ImuLogImportResult& result, ImportedSamples& samples) {
   std::vector<std::uint8_t> bytes;
-  ImportedSamples samples;
+  std::uint64_t clipped = 0;
   const auto progress = [&] {
     settings.progress({.bytes_read = settings.file_size, .bytes_total = settings.file_size, .samples = result.samples});
   };
   for (const ImuRow& row : rows) {
     if (beyond_frame_range(row.accel, settings.accel_lsb) || beyond_frame_range(row.gyro, settings.gyro_lsb)) {
-      ++result.clipped;
+      ++clipped;
     }
     bytes.clear();
     protocol::imu::encode({.seq = static_cast<std::uint16_t>(result.samples),
                            .device_time_us = row.t_us,
                            .payload = calibration.to_counts(row.accel, row.gyro, {}, 0.0)},
                           bytes);
-    engine.on_chunk(0, recording, bytes, ns(row.t_us), ns(row.t_us));
+    session.feed(bytes, ns(row.t_us), ns(row.t_us));
     ++result.samples;
     samples.add(static_cast<double>(row.t_us - result.first_us) * 1e-6, ns(row.t_us), row.accel, row.gyro);
-    store.commit_if_due(std::chrono::steady_clock::now());
     if (settings.progress && result.samples % kImportProgressEvery == 0) progress();
   }
   if (settings.progress) progress();
   const std::int64_t last = ns(result.last_us);
-  engine.finish_link(0, recording, last, last);
-  engine.finish();
-  return samples;
+  session.finish_link(last, last);
+  return clipped;
 }
 
 // The log's own events, then what the import left out, clipped or found damaged, at the last sample.
-void record_import_events(SessionEvents& events, std::int64_t link, ImuLog& log, const ImuLogImportResult& result) {
+void record_import_events(ImportSession& session, ImuLog& log, std::uint64_t clipped,
+                          const ImuLogImportResult& result) {
   const std::int64_t last = ns(result.last_us);
-  for (LogEvent& e : log.events) events.add(std::nullopt, ns(e.t_us), std::move(e.kind), 1, std::move(e.detail));
-  for (const auto& [reason, count] : result.skipped) {
-    events.add(link, last, "import_skipped", static_cast<std::int64_t>(count),
-               log.file + ": " + std::to_string(count) + " " + result.imu_source + " records: " + reason);
+  const EventAt on_link{.link = session.link(), .mono_ns = last, .wall_ns = last};
+  const EventAt on_session{.mono_ns = last, .wall_ns = last};
+  for (LogEvent& e : log.events) {
+    session.log_event({.mono_ns = ns(e.t_us), .wall_ns = ns(e.t_us)}, std::move(e.kind), std::move(e.detail));
   }
-  for (const auto& [reason, count] : result.reference_skipped) {
-    events.add(std::nullopt, last, "import_skipped", static_cast<std::int64_t>(count),
-               log.file + ": " + std::to_string(count) + " reference rows: " + reason);
+  const std::string records = log.imu_source + " records";
+  for (const auto& [reason, count] : log.skipped) {
+    session.report({.kind = ProblemKind::skipped, .count = count, .what = records, .why = reason}, on_link,
+                   log.file + ": " + std::to_string(count) + " " + records + ": " + reason);
   }
-  if (result.clipped > 0) {
-    events.add(link, last, "import_clipped", static_cast<std::int64_t>(result.clipped),
-               log.file + ": " + std::to_string(result.clipped) + " samples beyond the frames' range, clipped");
+  for (const auto& [reason, count] : log.reference_skipped) {
+    session.report({.kind = ProblemKind::skipped, .count = count, .what = "reference rows", .why = reason}, on_session,
+                   log.file + ": " + std::to_string(count) + " reference rows: " + reason);
+  }
+  if (clipped > 0) {
+    session.report(
+        {.kind = ProblemKind::clipped, .count = clipped, .what = "samples", .why = "beyond the frames' range"}, on_link,
+        log.file + ": " + std::to_string(clipped) + " samples beyond the frames' range, clipped");
   }
   if (log.damage) {
-    events.add(std::nullopt, last, "import_damaged", 1,
-               log.file + ": read up to the damage, " + *log.damage + "; everything before it is imported");
+    session.report({.kind = ProblemKind::damaged,
+                    .count = 1,
+                    .what = "stretch of " + log.file,
+                    .why = *log.damage + "; everything before it is imported"},
+                   on_session,
+                   log.file + ": read up to the damage, " + *log.damage + "; everything before it is imported");
   }
 }
 
@@ -254,22 +241,22 @@ void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& setti
   const auto calibration = import_calibration(settings.accel_lsb, settings.gyro_lsb);
   take_log_summary(log, result);
 
-  pipeline::RecordedSession recorded = pipeline::begin_recorded_session(
+  ImportSession session(
       store, {.kind = "import", .source = log.source, .config = log.config, .started_wall_ns = ns(result.first_us)},
-      {{.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, settings.imu_axes}, .device = log.device}});
-  result.session = recorded.id;
-  const std::int64_t link = recorded.store_links[0];
-  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
-  const ImportedSamples samples = record_rows(store, log.rows, recording, calibration, settings, result);
+      {.recorded = {"imu0", protocol::WireFormat::imubridge, calibration, settings.imu_axes}, .device = log.device},
+      settings.on_problem);
+  result.session = session.id();
+  ImportedSamples samples;
+  const std::uint64_t clipped = record_rows(session, log.rows, calibration, settings, result, samples);
   for (const auto& row : log.reference) store.append_reference(result.session, row);
 
+  record_import_events(session, log, clipped, result);
   const std::int64_t last = ns(result.last_us);
-  SessionEvents events{.store = store, .session = result.session, .end = last};
-  record_import_events(events, link, log, result);
-  result.gaps = samples.record_gaps(store, result.session, link, settings.gap_threshold_s, samples.t_ns.front());
-  result.axes = samples.resolve_axes(settings.declared_axes);
-  if (result.axes.mismatch) events.add(link, last, "imu_axes_mismatch", 1, *result.axes.mismatch);
-  pipeline::end_recorded_session(store, result.session, events.end);
+  ImportChecks checks = session.end(samples, settings.gap_threshold_s, samples.t_ns.front(), settings.declared_axes,
+                                    {.link = session.link(), .mono_ns = last, .wall_ns = last},
+                                    std::max(last, session.latest_event_ns()));
+  result.gaps = std::move(checks.gaps);
+  result.axes = std::move(checks.axes);
 }
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

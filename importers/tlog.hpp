@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-namespace imubridge::replay::tlog {
+namespace imubridge::importers::tlog {
 
 inline constexpr std::size_t kTimeSize = 8;
 
@@ -71,4 +71,4 @@ inline constexpr std::uint64_t kResyncWindowUs = 600'000'000;  // 10 min
 // Appends one record: `time_us` big-endian, then the frame as it is.
 void append_record(std::vector<std::uint8_t>& out, std::uint64_t time_us, std::span<const std::uint8_t> frame);
 
-}  // namespace imubridge::replay::tlog
+}  // namespace imubridge::importers::tlog

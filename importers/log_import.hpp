@@ -17,10 +17,11 @@
 #include <vector>
 
 #include "estimator/imu_axes.hpp"
-#include "replay/import_progress.hpp"
+#include "importers/import_problem.hpp"
+#include "importers/import_progress.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::replay {
+namespace imubridge::importers {
 
 // The IMU stopping for longer than this is a hole in the data: a `gap` event. 0.5 s is 25 periods of the slowest IMU
 // logs seen (ArduPilot's 50 Hz), far above any logger's write stall (PX4 reports those as dropouts of tens of ms), and
@@ -151,32 +152,31 @@ struct ImuLogSettings {
   double gap_threshold_s = kDefaultGapThresholdS;
   ImportProgressCallback progress{};
   std::uint64_t file_size = 0;  // for progress
+  ProblemCallback on_problem{};
 };
 
 // The settings from an import's options, checked before anything is read: throws std::invalid_argument for
 // resolutions that are not positive and finite, a gap threshold that is not, or IMU axes that do not parse. `progress`
-// and the file's size (for it) are taken along.
+// and the file's size (for it) and `on_problem` are taken along.
 ImuLogSettings imu_log_settings(double accel_lsb, double gyro_lsb, const std::string& imu_axes, double gap_threshold_s,
-                                const ImportProgressCallback& progress, const std::filesystem::path& file);
+                                const ImportProgressCallback& progress, const std::filesystem::path& file,
+                                const ProblemCallback& on_problem);
 
+// What an on-board log's import made; what it skipped, clipped or found damaged went to `on_problem`.
 struct ImuLogImportResult {
   std::int64_t session = 0;
   std::string imu_source;
-  std::uint64_t samples = 0;                     // IMU samples imported
-  std::map<std::string, std::uint64_t> skipped;  // IMU records not imported, by reason
-  std::uint64_t clipped = 0;                     // samples with a value clipped to the frame's range
+  std::uint64_t samples = 0;  // IMU samples imported
   std::uint64_t reference_rows = 0;
-  std::map<std::string, std::uint64_t> reference_skipped;
   std::uint64_t first_us = 0, last_us = 0;  // the first and last sample's log times
-  std::optional<std::string> damage;        // the file was read up to damage: what and where
   Gaps gaps;                                // holes in the IMU's data
   estimator::AxesResolution axes;
 };
 
-// Records `log` as a new session: one link `imu0` of imubridge frames (the rows, encoded at the settings'
-// resolution, through the session engine without estimation: an import has no parameters, a replay estimates), the
-// reference, the events, then the skipped and clipped records, the damage, the gaps and an axes mismatch as events.
+// Records `log` as a new session (ImportSession): one link `imu0` of imubridge frames (the rows, encoded at the
+// settings' resolution), the reference, the events, then the skipped and clipped records and the damage as problems,
+// the gaps and an axes mismatch as events.
 // Both receive clocks are the log's time in ns, the device clock the log's µs. Fills `result` (its own fields only).
 void record_imu_log(store::Store& store, ImuLog log, const ImuLogSettings& settings, ImuLogImportResult& result);
 
-}  // namespace imubridge::replay
+}  // namespace imubridge::importers

@@ -1,4 +1,4 @@
-#include "replay/ulog.hpp"
+#include "importers/ulog.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -7,9 +7,9 @@
 #include <set>
 #include <utility>
 
-#include "replay/file_bytes.hpp"
+#include "importers/file_bytes.hpp"
 
-namespace imubridge::replay::ulog {
+namespace imubridge::importers::ulog {
 namespace {
 
 static_assert(std::endian::native == std::endian::little, "ULog is little endian; so is every target imubridge has");
@@ -511,4 +511,4 @@ Log read_file(const std::filesystem::path& path, const ImportProgressCallback& p
   }
 }
 
-}  // namespace imubridge::replay::ulog
+}  // namespace imubridge::importers::ulog
