@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <Eigen/Cholesky>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <chrono>
 #include <cmath>
@@ -68,28 +69,41 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
 }
 
 // Why the parameters [first, end) of a fit are not determined by the data, or nullopt: a standard error that cannot
-// be computed, or standard errors as large as the values themselves (the data cannot tell the effect from none).
+// be computed, or a joint Wald statistic θᵀ Σ⁻¹ θ over them no larger than their number, which is what noise alone
+// gives an effect that is not there (for one parameter: a standard error as large as the value). Jointly, because an
+// effect's own parameters may be told apart only together: an accelerometer scale's common part hides in the lever
+// arm (docs/effects.md) while the ratio of its two axes is sharp.
 std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
   // An effect with no parameters of its own (the measured thrust in place of g, a self-consistent velocity) has
-  // nothing the data must determine: the other rules judge it. Norms of nothing, 0 against 0, would refuse it.
+  // nothing the data must determine: the other rules judge it.
   if (first >= fit.values.size()) return std::nullopt;
-  double value_norm = 0.0, error_norm = 0.0;
-  for (std::size_t i = first; i < fit.values.size(); ++i) {
-    const double se = fit.std_errors.empty() ? std::numeric_limits<double>::quiet_NaN() : fit.std_errors[i];
-    if (!std::isfinite(se)) {
-      return "undetermined: the standard error of " + model.parameters()[i].name + " cannot be computed (" +
+  const auto n = static_cast<Eigen::Index>(fit.values.size() - first);
+  Eigen::VectorXd value(n), se(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const auto k = first + static_cast<std::size_t>(i);
+    se[i] = fit.std_errors.empty() ? std::numeric_limits<double>::quiet_NaN() : fit.std_errors[k];
+    if (!std::isfinite(se[i])) {
+      return "undetermined: the standard error of " + model.parameters()[k].name + " cannot be computed (" +
              (fit.covariance_failure.empty() ? std::string("the covariance is singular") : fit.covariance_failure) +
              ")";
     }
-    value_norm += fit.values[i] * fit.values[i];
-    error_norm += se * se;
+    value[i] = fit.values[k];
   }
-  if (error_norm < value_norm) return std::nullopt;
-  char why[200];
+  Eigen::MatrixXd covariance = se.array().square().matrix().asDiagonal();
+  if (fit.correlation.rows() == static_cast<Eigen::Index>(fit.values.size())) {
+    const auto f = static_cast<Eigen::Index>(first);
+    covariance = se.asDiagonal() * fit.correlation.block(f, f, n, n) * se.asDiagonal();
+  }
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(covariance);
+  const double wald = ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0.0).all()
+                          ? value.dot(ldlt.solve(value))
+                          : 0.0;
+  if (wald > static_cast<double>(n)) return std::nullopt;
+  char why[240];
   std::snprintf(why, sizeof why,
-                "undetermined: its parameters' standard errors (norm %.3g) are as large as their values (norm %.3g): "
-                "the data cannot tell it from none",
-                std::sqrt(error_norm), std::sqrt(value_norm));
+                "undetermined: its parameters' Wald statistic %.3g is no larger than their number (%td), what noise "
+                "alone gives (standard errors norm %.3g, values norm %.3g): the data cannot tell it from none",
+                wald, n, se.norm(), value.norm());
   return why;
 }
 
@@ -411,7 +425,10 @@ void judge(const Search& search, const Model& model, State& state, const State* 
     state.summary.likelihood = flown_as->summary.likelihood;
   } else {
     state.summary.velocity = estimator::score_velocity(search.series, state.params, search.windows);
-    if (!search.judged_by_velocity)
+    // The filter's likelihood judges what the filter error method fitted (its process noise with the model). Eq. (12)'s
+    // fit tunes no filter: the likelihood of its models would be that of a filter at its default noise, judging a
+    // model fitted to another velocity (it refused eq. (12)'s true linear drag on seed 9 of effects-sweep).
+    if (!search.judged_by_velocity && search.setup.velocity == VelocitySource::filter)
       state.summary.likelihood = estimator::filter_log_likelihood(search.series, state.params, search.windows);
   }
   state.summary.implausible.clear();
