@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -127,12 +129,33 @@ LeastSquaresDrag fit_least_squares_drag(const ImuSeries& series, const TimeWindo
     const double det = n * svv - sv * sv;
     if (!(det > 0.0) || n < 2.0)
       throw std::invalid_argument("the least-squares anchor: the training velocity does not vary");
-    const double slope = (n * sva - sv * sa) / det;
-    if (!(slope < 0.0))
-      throw std::invalid_argument(std::string("the least-squares anchor: the accelerometer does not fall with the ") +
-                                  (axis == 0 ? "x" : "y") + " velocity on the training window (no drag to invert)");
+    const double slope = (n * sva - sv * sa) / det, intercept = (sa - slope * sv) / n;
+    // The slope's standard error from the line's residual (blocks taken as independent).
+    double rss = 0.0;
+    for (std::size_t i = 0; i < blocks.t.size(); ++i) {
+      if (!inside(blocks.t[i], train)) continue;
+      const double r = blocks.accel[i][axis] - intercept - slope * blocks.velocity[i][axis];
+      rss += r * r;
+    }
+    const double slope_se = n > 2.0 ? std::sqrt(rss / (n - 2.0) * n / det) : std::numeric_limits<double>::infinity();
+    const char* name = axis == 0 ? "x" : "y";
+    char what[200];
+    if (slope > kAnchorSlopeSignificance * slope_se) {
+      std::snprintf(what, sizeof what,
+                    "the least-squares anchor: the accelerometer rises with the %s velocity on the training window "
+                    "(slope %+.3g ± %.2g 1/s): no drag to invert",
+                    name, slope, slope_se);
+      throw std::invalid_argument(what);
+    }
+    if (-slope < kAnchorSlopeSignificance * slope_se) {
+      std::snprintf(what, sizeof what, "%sno drag read on %s (slope %+.3g ± %.2g 1/s): zero velocity there",
+                    out.note.empty() ? "" : "; ", name, slope, slope_se);
+      out.note += what;
+      out.b[axis] = sa / n;
+      continue;
+    }
     out.k[axis] = -slope;
-    out.b[axis] = (sa - slope * sv) / n;
+    out.b[axis] = intercept;
   }
   return out;
 }
@@ -141,7 +164,10 @@ LeastSquaresDragScores score_least_squares_drag(const ImuSeries& series, const L
                                                 const TimeWindow& window) {
   const Blocks blocks = block_means(series);
   std::vector<Eigen::Vector2d> inverted(blocks.t.size());
-  for (std::size_t i = 0; i < blocks.t.size(); ++i) inverted[i] = (fit.b - blocks.accel[i]).cwiseQuotient(fit.k);
+  for (std::size_t i = 0; i < blocks.t.size(); ++i) {
+    for (int axis = 0; axis < 2; ++axis)  // an axis without a drag read flies at zero velocity
+      inverted[i][axis] = fit.k[axis] > 0.0 ? (fit.b[axis] - blocks.accel[i][axis]) / fit.k[axis] : 0.0;
+  }
   // The centred moving average over the blocks within half the smoothing span (fewer at the ends and at gaps).
   const double half = 0.5 * kAnchorSmoothingSeconds;
   LeastSquaresDragScores out;

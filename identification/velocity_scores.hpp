@@ -50,11 +50,16 @@ VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector
 inline constexpr double kAnchorBlockSeconds = 0.1;
 inline constexpr double kAnchorSmoothingSeconds = 1.0;
 struct LeastSquaresDrag {
-  Eigen::Vector2d k = Eigen::Vector2d::Zero();  // 1/s
+  // 1/s; 0 on an axis whose accelerometer does not fall with the velocity by more than kAnchorSlopeSignificance of its
+  // standard errors: no drag is read there, and the anchor gives that axis zero velocity, as a user would, instead of
+  // dividing by a slope that is noise (the X500's y: k = 0.031 1/s from 0.18 m/s of motion gave 11 m/s).
+  Eigen::Vector2d k = Eigen::Vector2d::Zero();
   Eigen::Vector2d b = Eigen::Vector2d::Zero();  // m/s^2
+  std::string note;                             // the axes without a drag read, and why; empty when both have one
 };
-// Fitted on `train`. Throws std::invalid_argument without a reference, or when an axis's training velocity does not
-// vary or its slope is not a drag (k <= 0: no velocity to invert).
+inline constexpr double kAnchorSlopeSignificance = 2.0;
+// Fitted on `train`. Throws std::invalid_argument without a reference, when an axis's training velocity does not vary,
+// or when its accelerometer rises with the velocity beyond its standard errors (no drag: wrong axes, most likely).
 LeastSquaresDrag fit_least_squares_drag(const ImuSeries& series, const TimeWindow& train);
 // The fit inverted on `window` of a series (the one it was fitted on, or another flight), scored against the
 // reference's block means, in the series' axes.

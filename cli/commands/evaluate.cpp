@@ -166,6 +166,7 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
                               {"k", {anchor.fit.k.x(), anchor.fit.k.y()}},
                               {"b", {anchor.fit.b.x(), anchor.fit.b.y()}},
                               {"blocks_scored", a.blocks}};
+      if (!anchor.fit.note.empty()) out["least_squares"]["note"] = anchor.fit.note;
     } catch (const AnchorUnfit& e) {
       out["least_squares_error"] = e.what();
     }

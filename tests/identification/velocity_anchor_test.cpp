@@ -78,5 +78,21 @@ TEST(LeastSquaresAnchor, RefusesWhatItCannotFit) {
   EXPECT_THROW(fit_least_squares_drag(s, {0.0, 60.0}), std::invalid_argument);
 }
 
+// An axis whose accelerometer does not fall with the velocity beyond its noise has no drag to invert: the anchor
+// flies it at zero velocity, as a user would, and says so, instead of dividing by a slope that is noise (the X500's y
+// gave 11 m/s that way).
+TEST(LeastSquaresAnchor, AnAxisWithoutADragReadFliesAtZeroVelocity) {
+  const ImuSeries s = drag_flight({0.3, 0.0}, {0.0, 0.2}, 1.0, 6);  // y: no drag, the vibration alone
+  const LeastSquaresDrag fit = fit_least_squares_drag(s, {0.0, 60.0});
+  EXPECT_NEAR(fit.k.x(), 0.3, 0.03);
+  EXPECT_EQ(fit.k.y(), 0.0);
+  EXPECT_NE(fit.note.find("no drag read on y"), std::string::npos) << fit.note;
+  const LeastSquaresDragScores scores = score_least_squares_drag(s, fit, {0.0, 60.0});
+  // y's error is then the reference's own y speed, not a velocity divided out of noise.
+  double vy2 = 0.0;
+  for (const Eigen::Vector3d& v : s.reference->velocity_ned) vy2 += v.y() * v.y();
+  EXPECT_NEAR(scores.smoothed.axis.y(), std::sqrt(vy2 / static_cast<double>(s.size())), 0.05);
+}
+
 }  // namespace
 }  // namespace imubridge::estimator
