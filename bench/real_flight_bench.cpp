@@ -17,7 +17,7 @@
 #include "diagnose/search.hpp"
 #include "identification/flight_span.hpp"
 #include "identification/identify.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "importers/euroc_import.hpp"
 #include "scratch_dir.hpp"
 #include "store/store.hpp"
@@ -52,7 +52,7 @@ const std::optional<RealFlight>& real_flight() {
     out.database = scratch.database();
     out.session = imported.session;
     out.series =
-        pipeline::read_session_series(store, imported.session, {.reference = pipeline::ReferenceUse::when_present})
+        replay::read_session_series(store, imported.session, {.reference = replay::ReferenceUse::when_present})
             .series;
     const auto span = estimator::detect_flight(out.series);
     if (!span) return std::nullopt;
@@ -74,9 +74,9 @@ bool skip_without_flight(benchmark::State& state) {
 void ReadSession(benchmark::State& state) {
   if (skip_without_flight(state)) return;
   const store::Store store(real_flight()->database, {.read_only = true});
-  const pipeline::SessionSeriesOptions options{.reference = pipeline::ReferenceUse::when_present,
+  const replay::SessionSeriesOptions options{.reference = replay::ReferenceUse::when_present,
                                                .estimate_reference_delay = true};
-  for (auto _ : state) benchmark::DoNotOptimize(pipeline::read_session_series(store, real_flight()->session, options));
+  for (auto _ : state) benchmark::DoNotOptimize(replay::read_session_series(store, real_flight()->session, options));
 }
 
 void Identify(benchmark::State& state, estimator::VelocitySource velocity, bool hold_bias) {

@@ -2,7 +2,7 @@
 // How an IMU's axes sit in the vehicle's FRD body frame (x forward, y right, z down), declared or detected from
 // gravity, and how a reference attitude's frame relates to the IMU's axes. Everything downstream (model,
 // identification, estimator, diagnose) takes samples in body axes, up to the small mounting rotation it fits;
-// pipeline::read_session_series and pipeline::EstimationStage apply what is resolved here. docs/estimator.md,
+// replay::read_session_series and pipeline::EstimationStage apply what is resolved here. docs/estimator.md,
 // "IMU axes".
 #include <Eigen/Core>
 #include <Eigen/Geometry>

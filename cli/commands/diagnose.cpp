@@ -27,7 +27,7 @@
 #include "diagnose/search.hpp"
 #include "estimator/params.hpp"
 #include "identification/identify.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::cli {
@@ -250,7 +250,7 @@ dg::DiagnoseOptions search_options(const DiagnoseCliOptions& o) {
 
 // What is diagnosed: one session, or several flights joined (cli/commands/flight_set_reading.hpp).
 struct DiagnosedData {
-  std::optional<pipeline::SessionSeries> session;
+  std::optional<replay::SessionSeries> session;
   std::optional<FlightSetReading> flights;
   std::optional<JoinedFlights> joined;
 };
@@ -262,12 +262,12 @@ DiagnosedData read_data(const store::Store& store, const DiagnoseCliOptions& o,
                         bool several, dg::DiagnoseOptions& options) {
   // The reference when the session has one, unless told otherwise. The filter's fit never reads it; a reference
   // read beside it only scores the velocity in the report.
-  using pipeline::ReferenceUse;
+  using replay::ReferenceUse;
   const ReferenceUse reference = !o.velocity                                          ? ReferenceUse::when_present
                                  : *options.velocity == dg::VelocitySource::reference ? ReferenceUse::required
                                  : *options.velocity == dg::VelocitySource::filter    ? ReferenceUse::when_present
                                                                                       : ReferenceUse::none;
-  pipeline::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
+  replay::SessionSeriesOptions reading{.link = o.link, .reference = reference, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
   DiagnosedData data;
   if (several) {
@@ -279,7 +279,7 @@ DiagnosedData read_data(const store::Store& store, const DiagnoseCliOptions& o,
     options.validate = data.joined->validate;
     options.session = o.db + "#" + o.sessions + (o.validate_sessions ? "/" + *o.validate_sessions : "");
   } else {
-    data.session = pipeline::read_session_series(store, fit_ids.front(), reading);
+    data.session = replay::read_session_series(store, fit_ids.front(), reading);
     if (!options.velocity)
       options.velocity = data.session->series.reference ? dg::VelocitySource::reference : dg::VelocitySource::filter;
     std::tie(options.train, options.validate) = o.windows.resolve(*data.session);
@@ -295,7 +295,7 @@ void add_reading(const DiagnosedData& data, dg::Diagnosis& diagnosis) {
     diagnosis.final_params.conditions_flight = data.flights->identity;
     measure_transfer(*data.flights, diagnosis.final_params, stdout);
   } else {
-    const pipeline::SessionSeries& session = *data.session;
+    const replay::SessionSeries& session = *data.session;
     diagnosis.imu_axes = session.axes.description;
     diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
     diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);

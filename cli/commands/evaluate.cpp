@@ -22,7 +22,7 @@
 #include "identification/flight_set.hpp"
 #include "identification/identify.hpp"
 #include "identification/velocity_scores.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::cli {
@@ -46,11 +46,11 @@ json to_json(const est::VelocityError& e) {
   return {{"x", e.axis.x()}, {"y", e.axis.y()}, {"horizontal", e.horizontal}};
 }
 
-pipeline::SessionSeries read_session(const store::Store& store, std::int64_t id, const EvaluateCliOptions& o) {
-  pipeline::SessionSeriesOptions reading{
-      .link = o.link, .reference = pipeline::ReferenceUse::required, .imu_axes = o.imu_axes};
+replay::SessionSeries read_session(const store::Store& store, std::int64_t id, const EvaluateCliOptions& o) {
+  replay::SessionSeriesOptions reading{
+      .link = o.link, .reference = replay::ReferenceUse::required, .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
-  pipeline::SessionSeries session = pipeline::read_session_series(store, id, reading);
+  replay::SessionSeries session = replay::read_session_series(store, id, reading);
   for (const std::string& w : session.warnings)
     std::fprintf(stderr, "warning: session %lld: %s\n", static_cast<long long>(id), w.c_str());
   return session;
@@ -75,11 +75,11 @@ struct Anchor {
   std::vector<std::int64_t> sessions;
   std::vector<est::TimeWindow> train;  // each session's, in its own time
 };
-est::TimeWindow anchor_window(const pipeline::SessionSeries& session, const EvaluateCliOptions& o) {
+est::TimeWindow anchor_window(const replay::SessionSeries& session, const EvaluateCliOptions& o) {
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   return o.baseline_train ? est::parse_window(*o.baseline_train, span) : span;
 }
-Anchor fit_anchor(const pipeline::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
+Anchor fit_anchor(const replay::SessionSeries& session, std::int64_t id, const EvaluateCliOptions& o) {
   const est::TimeWindow train = anchor_window(session, o);
   return {anchor_step([&] { return est::fit_least_squares_drag(session.series, train); }), {id}, {train}};
 }
@@ -90,7 +90,7 @@ Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& id
   Anchor out;
   std::vector<est::ImuSeries> flights;
   for (const std::int64_t id : ids) {
-    const pipeline::SessionSeries session = read_session(store, id, o);
+    const replay::SessionSeries session = read_session(store, id, o);
     out.train.push_back(est::clip(anchor_window(session, o), session.series.t, "anchor's training"));
     flights.push_back(est::cut(session.series, out.train.back()));
   }
@@ -105,7 +105,7 @@ Anchor fit_anchor(const store::Store& store, const std::vector<std::int64_t>& id
 json evaluate_session(const store::Store& store, std::int64_t id, const std::optional<est::ModelParams>& file,
                       const std::optional<Anchor>& fixed_anchor, const std::string& anchor_error,
                       const EvaluateCliOptions& o) {
-  const pipeline::SessionSeries session = read_session(store, id, o);
+  const replay::SessionSeries session = read_session(store, id, o);
   const est::TimeWindow span = percent_span(session, o.in_flight).window;
   const std::optional<est::TimeWindow> window =
       o.window ? std::optional(est::parse_window(*o.window, span)) : std::nullopt;

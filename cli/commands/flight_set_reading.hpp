@@ -19,7 +19,7 @@
 #include "identification/flight_set.hpp"
 #include "identification/identify.hpp"
 #include "identification/velocity_scores.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::cli {
@@ -51,7 +51,7 @@ struct FlightSetReading {
 // Refuses a set without validating flights, or a flight both fitting and validating.
 inline FlightSetReading read_flight_set(const store::Store& store, const std::vector<std::int64_t>& fit_ids,
                                         const std::vector<std::int64_t>& validate_ids,
-                                        const pipeline::SessionSeriesOptions& reading, const WindowArgs& windows) {
+                                        const replay::SessionSeriesOptions& reading, const WindowArgs& windows) {
   if (validate_ids.empty())
     throw std::invalid_argument(
         "several sessions fit one calibration: name the flights that validate it with --validate-session (e.g. "
@@ -69,7 +69,7 @@ inline FlightSetReading read_flight_set(const store::Store& store, const std::ve
   out.identity = "flights:";
   for (std::size_t i = 0; i < out.ids.size(); ++i) {
     const bool fits = i < out.fitting;
-    const pipeline::SessionSeries session = pipeline::read_session_series(store, out.ids[i], reading);
+    const replay::SessionSeries session = replay::read_session_series(store, out.ids[i], reading);
     for (const std::string& w : session.warnings)
       std::fprintf(stderr, "warning: session %lld: %s\n", static_cast<long long>(out.ids[i]), w.c_str());
     const estimator::TimeWindow span = percent_span(session, windows.in_flight).window;

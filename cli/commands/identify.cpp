@@ -27,7 +27,7 @@
 #include "fileio/whole_file.hpp"
 #include "identification/plausibility.hpp"
 #include "identification/velocity_scores.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "store/store.hpp"
 
 namespace imubridge::cli {
@@ -174,13 +174,13 @@ est::IdentifyOptions identify_options(const IdentifyCliOptions& o) {
   return options;
 }
 
-pipeline::SessionSeriesOptions reading_options(const IdentifyCliOptions& o, const est::IdentifyOptions& options) {
-  pipeline::SessionSeriesOptions reading{.link = o.link,
+replay::SessionSeriesOptions reading_options(const IdentifyCliOptions& o, const est::IdentifyOptions& options) {
+  replay::SessionSeriesOptions reading{.link = o.link,
                                          // Read when present in any case: the velocity the model gives is scored
                                          // against it (the filter's and eq. (12)'s fits never read it).
                                          .reference = o.velocity && options.velocity == est::VelocitySource::reference
-                                                          ? pipeline::ReferenceUse::required
-                                                          : pipeline::ReferenceUse::when_present,
+                                                          ? replay::ReferenceUse::required
+                                                          : replay::ReferenceUse::when_present,
                                          .imu_axes = o.imu_axes};
   set_reference_delay(reading, o.reference_delay);
   return reading;
@@ -308,7 +308,7 @@ int run(const IdentifyCliOptions& o) {
   const est::PlausibilityLimits limits = plausibility_limits(o.limits);
 
   const store::Store store(o.db, {.read_only = true});
-  const pipeline::SessionSeries session = pipeline::read_session_series(store, session_id, reading_options(o, options));
+  const replay::SessionSeries session = replay::read_session_series(store, session_id, reading_options(o, options));
   for (const std::string& w : session.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   choose_velocity(o, options, session.series.reference.has_value());
   std::tie(options.train, options.validate) = o.windows.resolve(session);

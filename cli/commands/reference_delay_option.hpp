@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <optional>
 
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 
 namespace imubridge::cli {
 
@@ -16,18 +16,18 @@ inline void add_reference_delay_option(CLI::App& cmd, std::optional<double>& del
 }
 
 // The reading options for it: declared, or estimated.
-inline void set_reference_delay(pipeline::SessionSeriesOptions& options, const std::optional<double>& declared) {
+inline void set_reference_delay(replay::SessionSeriesOptions& options, const std::optional<double>& declared) {
   options.reference_delay = declared;
   options.estimate_reference_delay = !declared;
 }
 
 // "reference delay: ..." on stderr when the session's reference was read.
-inline void print_reference_delay(const pipeline::SessionSeries& session) {
+inline void print_reference_delay(const replay::SessionSeries& session) {
   if (!session.reference_delay_line.empty()) std::fprintf(stderr, "%s\n", session.reference_delay_line.c_str());
 }
 
 // What PARAMS.json records: the shift the reference was fitted and scored with, when there was a reference.
-inline std::optional<double> recorded_reference_delay(const pipeline::SessionSeries& session) {
+inline std::optional<double> recorded_reference_delay(const replay::SessionSeries& session) {
   if (!session.series.reference) return std::nullopt;
   return session.reference_shift_s;
 }

@@ -17,7 +17,7 @@
 #include "cli/pty.hpp"
 #include "estimator/params.hpp"
 #include "pipeline/session_config.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "replay/replayer.hpp"
 #include "replay/session_lookup.hpp"
 
@@ -138,7 +138,7 @@ int replay_into_run(const ReplayCommandOptions& o) {
   replay::ReplayOptions options;
   if (!o.params.empty()) {
     // The session's own flight keeps the conditions fitted on it; another flies the vehicle's calibration alone.
-    const pipeline::SessionSeries flight = pipeline::read_session_series(
+    const replay::SessionSeries flight = replay::read_session_series(
         store, o.session, {.link = o.link.empty() ? std::nullopt : std::optional(link_id(store, session, o.link))});
     std::string left;
     options.params = estimator::for_flight(estimator::parse_params(read_file(o.params), o.params),

@@ -16,7 +16,7 @@
 #include "identification/flight_span.hpp"
 #include "identification/identify.hpp"
 #include "identification/plausibility.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 
 namespace imubridge::cli {
 
@@ -28,7 +28,7 @@ struct PercentSpan {
 
 // The flight by the log's own land detector when the session has one (import ulog stores its takeoff and landing),
 // else by the rotors' vibration (estimator::detect_flight); which one is said.
-inline PercentSpan percent_span(const pipeline::SessionSeries& session, bool in_flight) {
+inline PercentSpan percent_span(const replay::SessionSeries& session, bool in_flight) {
   const estimator::ImuSeries& series = session.series;
   const estimator::TimeWindow whole = estimator::data_span(series.t);
   if (!in_flight) return {whole, std::nullopt};
@@ -77,7 +77,7 @@ struct WindowArgs {
   // The windows, resolved against the session (nullopt: the command's default; with a flight, the validation
   // window's default ends where the flight does).
   std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> resolve(
-      const pipeline::SessionSeries& session) const {
+      const replay::SessionSeries& session) const {
     const estimator::ImuSeries& series = session.series;
     const PercentSpan span = percent_span(session, in_flight);
     std::pair<std::optional<estimator::TimeWindow>, std::optional<estimator::TimeWindow>> out;

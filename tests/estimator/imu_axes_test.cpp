@@ -226,7 +226,7 @@ ImuSeries written_in(const ImuSeries& body, const Matrix3d& imu_to_body) {
   return s;
 }
 
-// What pipeline::read_session_series does to a series read in IMU axes.
+// What replay::read_session_series does to a series read in IMU axes.
 ImuSeries to_body(ImuSeries s, const ImuAxes& declared, ReferenceFrame expected_frame) {
   const AxesResolution r = resolve_axes(declared, detect_up(s));
   EXPECT_FALSE(r.mismatch) << *r.mismatch;

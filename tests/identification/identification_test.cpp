@@ -14,7 +14,7 @@
 
 #include "estimator/constants.hpp"
 #include "identification/identify.hpp"
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 #include "sim/imu_series.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
@@ -495,7 +495,7 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
   }
   const store::Store store(path_, {.read_only = true});
   // Declared FRD: these samples' made-up specific force would make `auto` turn them x-up.
-  const pipeline::SessionSeries plain = pipeline::read_session_series(store, session, {.imu_axes = "frd"});
+  const replay::SessionSeries plain = replay::read_session_series(store, session, {.imu_axes = "frd"});
   EXPECT_EQ(plain.link_id, 1);  // the link with the most samples
   EXPECT_EQ(plain.counts.samples, 192u);
   EXPECT_EQ(plain.counts.time_not_increasing, 1u);
@@ -506,8 +506,8 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
   EXPECT_DOUBLE_EQ(plain.series.t[189], 189 * 0.005);
   EXPECT_EQ(plain.series.accel[51].x(), 51.0);  // the repeat after sample 50 is gone
 
-  const pipeline::SessionSeries with =
-      pipeline::read_session_series(store, session, {.reference = pipeline::ReferenceUse::required, .imu_axes = "frd"});
+  const replay::SessionSeries with =
+      replay::read_session_series(store, session, {.reference = replay::ReferenceUse::required, .imu_axes = "frd"});
   EXPECT_EQ(with.counts.outside_reference, 1u);  // the first sample, received before the first pose
   EXPECT_EQ(with.counts.reference_rows, 101u);
   ASSERT_EQ(with.series.size(), 189u);
@@ -521,7 +521,7 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
   }
   EXPECT_FALSE(validate(with.series));
 
-  const pipeline::SessionSeries other = pipeline::read_session_series(store, session, {.link = 2});
+  const replay::SessionSeries other = replay::read_session_series(store, session, {.link = 2});
   EXPECT_EQ(other.series.size(), 5u);
 }
 
@@ -548,26 +548,26 @@ TEST_F(SessionSeriesTest, DerivesVelocityFromPositionsAndNamesWhatIsMissing) {
     store.commit();
   }
   const store::Store store(path_, {.read_only = true});
-  const pipeline::SessionSeries s =
-      pipeline::read_session_series(store, session, {.reference = pipeline::ReferenceUse::required});
+  const replay::SessionSeries s =
+      replay::read_session_series(store, session, {.reference = replay::ReferenceUse::required});
   ASSERT_EQ(s.series.size(), 200u);
   for (std::size_t k = 4; k < 196; ++k) {  // away from the one-sided ends
     const double t = 0.005 * static_cast<double>(k);
     EXPECT_LT((s.series.reference->velocity_ned[k] - Eigen::Vector3d(3.0, 2.0 * t, 0.0)).norm(), 1e-9) << k;
   }
-  EXPECT_THROW(pipeline::read_session_series(store, bare, {.reference = pipeline::ReferenceUse::required}),
+  EXPECT_THROW(replay::read_session_series(store, bare, {.reference = replay::ReferenceUse::required}),
                std::invalid_argument);
   // when_present (diagnose's default): the trajectory where the session has one, none where it has not.
   const auto when_present = [&](std::int64_t id) {
-    return pipeline::read_session_series(store, id, {.reference = pipeline::ReferenceUse::when_present});
+    return replay::read_session_series(store, id, {.reference = replay::ReferenceUse::when_present});
   };
   ASSERT_TRUE(when_present(session).series.reference);
   EXPECT_EQ(when_present(session).series.reference->velocity_ned, s.series.reference->velocity_ned);
   EXPECT_FALSE(when_present(bare).series.reference);
   EXPECT_EQ(when_present(bare).series.size(), 200u);
-  EXPECT_THROW(pipeline::read_session_series(store, 3), std::invalid_argument);                     // no samples
-  EXPECT_THROW(pipeline::read_session_series(store, 99), std::invalid_argument);                    // no such session
-  EXPECT_THROW(pipeline::read_session_series(store, session, {.link = 2}), std::invalid_argument);  // not its link
+  EXPECT_THROW(replay::read_session_series(store, 3), std::invalid_argument);                     // no samples
+  EXPECT_THROW(replay::read_session_series(store, 99), std::invalid_argument);                    // no such session
+  EXPECT_THROW(replay::read_session_series(store, session, {.link = 2}), std::invalid_argument);  // not its link
 }
 
 }  // namespace

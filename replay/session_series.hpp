@@ -13,7 +13,7 @@
 #include "estimator/reference_delay.hpp"
 #include "store/store.hpp"
 
-namespace imubridge::pipeline {
+namespace imubridge::replay {
 
 // Whether the reference trajectory is interpolated at every sample.
 enum class ReferenceUse {
@@ -80,4 +80,4 @@ struct SessionSeries {
 SessionSeries read_session_series(const store::Store& store, std::int64_t session,
                                   const SessionSeriesOptions& options = {});
 
-}  // namespace imubridge::pipeline
+}  // namespace imubridge::replay

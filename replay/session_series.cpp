@@ -1,4 +1,4 @@
-#include "pipeline/session_series.hpp"
+#include "replay/session_series.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -15,7 +15,7 @@
 #include "estimator/differentiator.hpp"
 #include "pipeline/session_config.hpp"
 
-namespace imubridge::pipeline {
+namespace imubridge::replay {
 namespace {
 
 using Eigen::Quaterniond;
@@ -93,7 +93,7 @@ std::string declared_axes(const store::Store& store, std::int64_t session, std::
     if (l.id == link_id) name = l.name;
   }
   try {
-    for (const RecordedLink& l : recorded_links(config)) {
+    for (const pipeline::RecordedLink& l : pipeline::recorded_links(config)) {
       if (l.name == name) return l.imu_axes;
     }
   } catch (const std::invalid_argument&) {
@@ -354,4 +354,4 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   return out;
 }
 
-}  // namespace imubridge::pipeline
+}  // namespace imubridge::replay
