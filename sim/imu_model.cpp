@@ -42,7 +42,7 @@ ImuReading ImuErrorModel::apply(const ImuReading& ideal, const Vector3d& lagged_
   const double vibration = errors_.vibration_amplitude * std::sin(2 * std::numbers::pi * errors_.vibration_hz * t);
   ImuReading out = ideal;
   out.accel = errors_.accel_scale_cross * lagged_accel + errors_.accel_nonlinearity * lagged_accel.cwiseAbs2() +
-              errors_.accel_bias + Vector3d::Constant(vibration) + noise(accel_sigma_);
+              errors_.accel_bias + errors_.accel_bias_drift * t + Vector3d::Constant(vibration) + noise(accel_sigma_);
   out.gyro = ideal.gyro + errors_.gyro_bias + noise(gyro_sigma_);
   out.mag = ideal.mag + noise(errors_.mag_noise_ut);
   return out;

@@ -20,6 +20,8 @@ struct ImuPose {
 // Defaults: ADXL327 (250 ug/sqrt(Hz)) and ITG3200 (0.03 deg/s/sqrt(Hz)) noise, no other error.
 struct ImuErrors {
   Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero();  // m/s^2, sensor axes
+  // m/s^2 per s, sensor axes: the bias drifting from accel_bias at t = 0, as a MEMS accelerometer warming up does.
+  Eigen::Vector3d accel_bias_drift = Eigen::Vector3d::Zero();
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();   // rad/s
   // Reading = M * specific force: diagonal 1 + scale error, off-diagonal cross-axis coupling.
   Eigen::Matrix3d accel_scale_cross = Eigen::Matrix3d::Identity();

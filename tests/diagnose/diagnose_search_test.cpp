@@ -187,6 +187,22 @@ TEST(FoundFirstImu, AGyroBiasThatWouldTurnTheVehicleOverIsRefused) {
   }
 }
 
+// Issue 25: a slowly drifting accelerometer bias (a MEMS part warming up: 0.01 m/s^2 per s, 0.5 m/s^2 over the
+// flight) is no effect of the library, and none may stand in for it; with the reference, the residual left says
+// so, as a trend. The same flight without the drift leaves none.
+TEST(ResidualTrend, ADriftingAccelerometerBiasIsFlaggedAsATrend) {
+  const auto trends = [](const Diagnosis& d) {
+    std::size_t n = 0;
+    for (const Unexplained& u : d.unexplained) n += u.kind == "trend" ? 1 : 0;
+    return n;
+  };
+  const Diagnosis drifting =
+      diagnose({.sim_effects = {"accel_bias_drift=0.01,0.01,0"}, .model = ModelKind::full, .max_steps = 2});
+  EXPECT_GT(trends(drifting), 0u) << "steps: " << drifting.steps.size() << last_candidates(drifting);
+  const Diagnosis steady = diagnose({.sim_effects = {}, .model = ModelKind::full, .max_steps = 2});
+  EXPECT_EQ(trends(steady), 0u);
+}
+
 // The full model (rigid body and mounting) has no drag of its own; give the flight a strong one.
 TEST(FoundFirstFull, QuadraticDragWithTheReference) {
   const Diagnosis d = diagnose({.sim_effects = {"quadratic_drag=0.5"}, .model = ModelKind::full, .max_steps = 1});
