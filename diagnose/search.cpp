@@ -89,15 +89,15 @@ std::optional<std::string> undetermined(const Model& model, const FitOutcome& fi
     }
     value[i] = fit.values[k];
   }
-  Eigen::MatrixXd covariance = se.array().square().matrix().asDiagonal();
-  if (fit.correlation.rows() == static_cast<Eigen::Index>(fit.values.size())) {
-    const auto f = static_cast<Eigen::Index>(first);
-    covariance = se.asDiagonal() * fit.correlation.block(f, f, n, n) * se.asDiagonal();
-  }
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(covariance);
-  const double wald = ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0.0).all()
-                          ? value.dot(ldlt.solve(value))
-                          : 0.0;
+  // The covariance block from the correlations, or from the standard errors alone when there are none.
+  const auto f = static_cast<Eigen::Index>(first);
+  const Eigen::MatrixXd correlation = fit.correlation.rows() == static_cast<Eigen::Index>(fit.values.size())
+                                          ? Eigen::MatrixXd(fit.correlation.block(f, f, n, n))
+                                          : Eigen::MatrixXd::Identity(n, n);
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(se.asDiagonal() * correlation * se.asDiagonal());
+  // A singular block (a pivot of zero or less) determines nothing.
+  const double wald =
+      ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0.0).all() ? value.dot(ldlt.solve(value)) : 0.0;
   if (wald > static_cast<double>(n)) return std::nullopt;
   char why[240];
   std::snprintf(why, sizeof why,
