@@ -118,13 +118,15 @@ struct Step {
 
 // Structure left in the final residual that no library effect took away.
 struct Unexplained {
-  std::string kind;   // "frequency", "correlation" or "trend"
+  // "frequency", "correlation", "trend", "autocorrelation", or "velocity ramp" (from the IMU alone: the filter's own
+  // velocity ramps past what a multirotor cruises at)
+  std::string kind;
   std::string axis;   // "x" or "y"
   std::string where;  // one readable line: "line at 37.5 Hz, 40x the median power", "accel.z at lag +0.010 s, r=0.41"
   double frequency_hz = 0.0;  // kind == "frequency"
   std::string signal;         // kind == "correlation"
   double lag_s = 0.0;         // kind == "correlation"
-  double value = 0.0;         // power ratio, correlation coefficient, or trend (m/s^2 per s)
+  double value = 0.0;  // power ratio, correlation coefficient, trend (m/s^2 per s), or the velocity's ramp (m/s^2)
 };
 
 // Per axis, the validation window's signals for the plots.

@@ -103,6 +103,7 @@ std::string kind_words(const std::string& kind) {
   if (kind == "frequency") return "periodic component";
   if (kind == "correlation") return "correlation with a measured signal";
   if (kind == "trend") return "trend over time";
+  if (kind == "velocity ramp") return "velocity that ramps";
   if (kind == "autocorrelation") return "self-correlation";
   return kind;
 }

@@ -163,13 +163,8 @@ void validate(std::span<const double> t, std::span<const double> residual, std::
     if (!(lo <= hi)) throw std::invalid_argument("residual analysis: an ignored band must be F0:F1 with F0 <= F1");
 }
 
-struct Trend {
-  double slope = 0.0, std_error = 0.0, variance_fraction = 0.0;
-  bool significant = false;
-};
+}  // namespace
 
-// Least-squares line; its slope's standard error is widened by Bartlett's factor between the detrended residual's
-// autocorrelation and the time ramp's (the same effective-sample-size rule as the correlations).
 Trend fit_trend(std::span<const double> t, std::span<const double> x, std::size_t max_lag) {
   const std::size_t n = x.size();
   const double t_mean = mean_of(t), x_mean = mean_of(x);
@@ -194,6 +189,8 @@ Trend fit_trend(std::span<const double> t, std::span<const double> x, std::size_
   out.significant = std::abs(out.slope) > 3.0 * out.std_error && out.variance_fraction >= kMaterialTrendFraction;
   return out;
 }
+
+namespace {
 
 std::string printf_string(const char* format, auto... args) {
   char buffer[256];

@@ -49,6 +49,16 @@ std::vector<Unexplained> unexplained_structure(const ResidualAnalysis& analysis,
 
 // ---- parts ----
 
+struct Trend {
+  double slope = 0.0, std_error = 0.0;  // per second
+  double variance_fraction = 0.0;       // share of x's variance the line accounts for
+  bool significant = false;             // |slope| > 3 std errors and variance_fraction >= kMaterialTrendFraction
+};
+// Least-squares line through x(t); its slope's standard error is widened by Bartlett's factor between the detrended
+// series' autocorrelation and the time ramp's, up to max_lag (the same effective-sample-size rule as the
+// correlations). Zero and not significant for a constant x or t.
+Trend fit_trend(std::span<const double> t, std::span<const double> x, std::size_t max_lag);
+
 // 1 / median(dt). Throws std::invalid_argument when the median step is not positive and finite.
 double sample_rate_hz(std::span<const double> t);
 

@@ -127,6 +127,25 @@ TEST(FromTheImuAlone, ThrustVariation) {
   expect_found_first(d, control("agile"), "thrust");
 }
 
+// Issue 25: a drifting accelerometer bias (0.01 m/s^2 per s) leaves no trend in the residual from the IMU alone: the
+// filter reads it as a velocity that ramps, and that ramp is what diagnose names. The same flight without the drift
+// runs its filter on the drag it adds and names none.
+TEST(FromTheImuAlone, ADriftingAccelerometerBiasIsNamedAsAVelocityRamp) {
+  const auto ramps = [](const Diagnosis& d) {
+    std::vector<std::string> axes;
+    for (const Unexplained& u : d.unexplained) {
+      if (u.kind == "velocity ramp") axes.push_back(u.axis);
+    }
+    return axes;
+  };
+  const Diagnosis drifting = diagnose({.sim_effects = {"accel_bias_drift=0.01,0.01,0"}});
+  ASSERT_FALSE(drifting.steps.empty()) << test::last_candidates(drifting);
+  EXPECT_FALSE(ramps(drifting).empty()) << "added " << chosen(drifting).front();
+  const Diagnosis steady = diagnose({});
+  ASSERT_FALSE(steady.steps.empty()) << "no drag added: the filter ran on nothing";
+  EXPECT_TRUE(ramps(steady).empty()) << ramps(steady).front();
+}
+
 TEST(FromTheImuAlone, LinearDragAndATimeOffset) {
   const Diagnosis d = diagnose({.sim_effects = {"linear_drag=1", "quadratic_drag=0", "time_offset=0.01"}});
   expect_found_first(d, control("full"), "linear_drag");
