@@ -834,8 +834,9 @@ bool take_step(const Search& search, int step_index, State& current, Diagnosis& 
 // From the IMU alone a drifting accelerometer bias (a MEMS part warming up) leaves the residual flat: the filter takes
 // the drifting force for a velocity that ramps. A multirotor does not hold one acceleration for tens of seconds, nor
 // ramp past the speeds it cruises at (kBriskSpeed), so a significant line through the filter's own velocity across
-// both windows that changes it by more than that is named as what the model lacks. A flight that speeds up along a
-// leg ramps too, by less: on real flights (docs/effects.md) such ramps stay within it.
+// both windows that changes it by more than that is named as what the model lacks. A drag fitted too weak to hold
+// the velocity lets it run away the same way. A flight that speeds up along a leg ramps too, by less: on real
+// flights (docs/effects.md) such ramps stay within it.
 std::vector<Unexplained> velocity_ramps(const Search& search, const State& current) {
   if (search.setup.velocity != VelocitySource::filter) return {};
   const Model model(search.signals, search.setup, current.effects);
@@ -860,8 +861,8 @@ std::vector<Unexplained> velocity_ramps(const Search& search, const State& curre
     char where[320];
     std::snprintf(where, sizeof where,
                   "the filter's velocity ramps by %+.3g m/s over %.0f s (%+.3g m/s^2, %.1f standard errors), more than "
-                  "a multirotor cruises at (%g m/s): an accelerometer bias that drifts (an IMU warming up) reads so; "
-                  "a velocity reference would tell",
+                  "a multirotor cruises at (%g m/s): a drag too weak to hold it, or an accelerometer bias that drifts "
+                  "(an IMU warming up), reads so; a velocity reference would tell",
                   change, span_s, trend.slope, std::abs(trend.slope) / trend.std_error, estimator::kBriskSpeed);
     u.where = where;
     out.push_back(std::move(u));
