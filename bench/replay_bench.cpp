@@ -37,24 +37,25 @@ estimator::ModelParams paper_params() {  // identified parameters: the estimator
 
 // The paper's flight recorded as `imubridge sim --db` records it: one imubridge frame per chunk. Returns the session.
 std::int64_t record_flight(store::Store& store) {
-  const auto calibration = protocol::Calibration::reference_board();
-  nlohmann::json config;
-  pipeline::add_recorded_links(config, {{"imu0", protocol::WireFormat::imubridge, calibration}});
-  const auto session = store.begin_session({.kind = "sim", .config = config.dump(), .started_wall_ns = 0});
-  const auto link = store.add_link(session, "imu0", "imubridge", "bench");
-  pipeline::LinkRecorder recorder(store, session, link, "imu0", protocol::WireFormat::imubridge, calibration);
+  const std::vector<pipeline::SessionLink> links{
+      {.recorded = {"imu0", protocol::WireFormat::imubridge, protocol::Calibration::reference_board()},
+       .device = "bench"}};
+  const pipeline::RecordedSession session =
+      pipeline::begin_recorded_session(store, {.kind = "sim", .started_wall_ns = 0}, links);
+  pipeline::SessionEngine engine(nullptr);
+  engine.add_link(pipeline::make_decoder(links[0].recorded));
+  pipeline::SessionRecording recording(store, session, links, engine);
+  engine.add_sink(recording);
   sim::FrameEncoder encoder(protocol::WireFormat::imubridge);
   std::vector<std::uint8_t> bytes;
-  std::vector<protocol::Sample> samples;
   sim::simulate(sim::make_scenario("paper", 1, kFlightSeconds), [&](const sim::SimSample& s) {
     bytes.clear();
-    samples.clear();
     encoder.encode(s, bytes);
     const auto t = std::llround(s.time_s * 1e9);
-    recorder.on_chunk(bytes, t, t, samples);
+    engine.on_chunk(0, bytes, t, t);
   });
   store.commit();
-  return session;
+  return session.id;
 }
 
 struct Flight {
@@ -124,7 +125,7 @@ void BM_ReplayStageShares(benchmark::State& state) {
     });
     timed("decode", [&] {
       samples.clear();
-      pipeline::LinkDecoder decoder(protocol::WireFormat::imubridge, 1, protocol::Calibration::reference_board());
+      pipeline::LinkDecoder decoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board());
       for (const auto& c : flight().chunks) decoder.feed(c.bytes, c.recv_mono_ns, samples);
       benchmark::DoNotOptimize(samples.data());
     });

@@ -66,58 +66,31 @@ void configure_logging(const Config& config) {
   spdlog::set_default_logger(std::move(logger));
 }
 
-// A link's chunks through its recorder (pipeline::RecordAndDecode) while recording, else through its decoder. A store
-// that fails mid-chunk ends the recording (the links go on): that chunk is decoded again without it, so its samples
-// still reach the sinks.
-class Daemon::LinkDecoding final : public pipeline::ChunkDecoding {
- public:
-  LinkDecoding(Daemon& daemon, Link& link) : daemon_(daemon), link_(link) {}
-  void decode(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
-              std::vector<protocol::Sample>& out) override {
-    if (link_.recorder) {
-      try {
-        link_.recorder->decode(bytes, recv_mono_ns, recv_wall_ns, out);
-        return;
-      } catch (const store::StoreError& e) {
-        daemon_.stop_recording(daemon_.stopping_here(e.what()));
-        out.clear();
-      }
-    }
-    link_.decoder->feed(bytes, recv_mono_ns, out);
-  }
-  void finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& out) override {
-    if (link_.recorder) {
-      link_.recorder->finish(mono_ns, wall_ns, out);
-    } else {
-      link_.decoder->finish(mono_ns, out);
-    }
-  }
-
- private:
-  Daemon& daemon_;
-  Link& link_;
-};
-
-// The daemon's own sink, first in line: each link's counts, a device restart said once, and the estimates into the
-// live run while recording.
+// The daemon's own sink, first in line: each link's counts, a device restart said once, and, while recording,
+// everything to the recording's sink. A store that fails ends the recording there (record()); the links, the
+// estimates and the other sinks go on without it.
 class Daemon::RecordingSink final : public pipeline::SessionSink {
  public:
   explicit RecordingSink(Daemon& daemon) : daemon_(daemon) {}
+  void on_chunk(std::size_t index, const pipeline::DecodedChunk& chunk) override {
+    daemon_.record([&](Recording& r) { r.sink->on_chunk(index, chunk); });
+  }
   void on_sample(std::size_t index, const protocol::Sample& sample, std::span<const store::Estimate> estimates,
-                 std::int64_t) override {
+                 std::int64_t recv_mono_ns) override {
     Link& link = *daemon_.links_[index];
     ++link.samples;
-    if (std::uint32_t& epoch = link.clock_epochs[sample.link_id]; sample.clock_epoch != epoch) {
+    link.estimates += estimates.size();
+    if (std::uint32_t& epoch = link.clock_epochs[sample.source]; sample.clock_epoch != epoch) {
       epoch = sample.clock_epoch;
       spdlog::warn(
           "link '{}': the device restarted (its sequence number and clock went back); estimating from its "
           "new clock",
           link.config.name);
     }
-    for (const store::Estimate& estimate : estimates) {
-      ++link.estimates;
-      daemon_.record([&](Recording& r) { r.store.append_estimate(r.run, estimate); });
-    }
+    daemon_.record([&](Recording& r) { r.sink->on_sample(index, sample, estimates, recv_mono_ns); });
+  }
+  void on_final_estimates(const protocol::SourceKey& source, std::span<const store::Estimate> estimates) override {
+    daemon_.record([&](Recording& r) { r.sink->on_final_estimates(source, estimates); });
   }
 
  private:
@@ -138,9 +111,11 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
   signals_.add(SIGUSR1);
   if (!params_note_.empty()) spdlog::info("{}", params_note_);
   pipeline::StageAxes axes;
-  axes.declared = [this](protocol::LinkId id) { return declared_axes(id); };
-  axes.on_resolved = [this](protocol::LinkId id, const estimator::AxesResolution& resolution) {
-    on_axes_resolved(id, resolution);
+  for (std::size_t i = 0; i < config_.links.size(); ++i) {
+    axes.links[static_cast<std::uint32_t>(i)] = estimator::parse_imu_axes(config_.links[i].axes);  // checked on load
+  }
+  axes.on_resolved = [this](const protocol::SourceKey& source, const estimator::AxesResolution& resolution) {
+    on_axes_resolved(source, resolution);
   };
   // Bad parameters fail here, before any I/O.
   engine_ =
@@ -151,46 +126,22 @@ Daemon::Daemon(Config config, std::optional<fs::path> config_file)
   if (auto problem = storage_problem()) {
     spdlog::error("not recording: {}", *problem);
     not_recording_ = NotRecording{.path = config_.store.path, .previous = "", .reason = *problem};
-    use_decoders();
   } else {
     open_recording(config_.store.path, "");  // a store that cannot be opened at start is fatal
   }
 }
 
-// Each link's declared IMU axes, and an XBee radio takes the axes of the link it is heard through: while not
-// recording its id says which (pipeline::is_unrecorded_radio_id); while recording it is a store link named after
-// that link (pipeline/radio_link.hpp), read back as replay reads it, so replay applies what the live run applied.
-estimator::ImuAxes Daemon::declared_axes(protocol::LinkId id) const {
-  const auto axes_of = [](const Link& link) {
-    return estimator::parse_imu_axes(link.config.axes);  // checked when the config was read
-  };
-  if (pipeline::is_unrecorded_radio_id(id)) return axes_of(*links_.at(pipeline::unrecorded_radio_link_index(id)));
-  for (const auto& link : links_) {
-    if (link->store_link == id) return axes_of(*link);
-  }
-  if (recording_) {
-    for (const store::Link& stored : recording_->store.links(recording_->session)) {
-      if (stored.id != id) continue;
-      if (const auto radio = pipeline::parse_radio_link_name(stored.name)) {
-        for (const auto& link : links_) {
-          if (link->config.name == radio->link) return axes_of(*link);
-        }
-      }
-    }
-  }
-  return estimator::auto_axes();
-}
-
-// Detection reports once per link: a declaration the data contradict is logged and recorded as an event.
-void Daemon::on_axes_resolved(protocol::LinkId id, const estimator::AxesResolution& resolution) {
-  spdlog::info("link {}: {}", id, resolution.description);
-  if (resolution.note) spdlog::info("link {}: {}", id, *resolution.note);
+// Detection reports once per source: a declaration the data contradict is logged and recorded as an event (on the
+// radio's store link for an XBee radio).
+void Daemon::on_axes_resolved(const protocol::SourceKey& source, const estimator::AxesResolution& resolution) {
+  const std::string& name = links_.at(source.link)->config.name;
+  const std::string who = fmt::format("'{}'", source.radio ? pipeline::radio_link_name(name, *source.radio) : name);
+  spdlog::info("link {}: {}", who, resolution.description);
+  if (resolution.note) spdlog::info("link {}: {}", who, *resolution.note);
   if (!resolution.mismatch) return;
-  spdlog::warn("link {}: {}", id, *resolution.mismatch);
-  const std::int64_t link =
-      pipeline::is_unrecorded_radio_id(id) ? links_[pipeline::unrecorded_radio_link_index(id)]->store_link : id;
+  spdlog::warn("link {}: {}", who, *resolution.mismatch);
   record([&](Recording& r) {
-    r.store.append_event(r.session, {.link_id = link,
+    r.store.append_event(r.session, {.link_id = r.sink->row(source),
                                      .mono_ns = mono_now_ns(),
                                      .wall_ns = wall_now_ns(),
                                      .kind = "imu_axes_mismatch",
@@ -203,8 +154,10 @@ void Daemon::add_link(const LinkConfig& link_config) {
   Link& l = *link;
   l.index = links_.size();
   l.config = link_config;
-  l.decoding = std::make_unique<LinkDecoding>(*this, l);
-  l.store_link = static_cast<std::int64_t>(links_.size()) + 1;  // distinct until a recording assigns its own
+  // The link's one decoder for the whole run, whether recording or not.
+  pipeline::LinkDecoder decoder(link_config.format, link_config.calibration);
+  if (const auto lock = mavlink_imu_lock(link_config)) decoder.lock_mavlink_imu(*lock);
+  engine_->add_link(std::move(decoder));
   l.port = std::make_unique<SerialLink>(
       io_, link_config,
       SerialLink::Handlers{
@@ -229,28 +182,26 @@ void Daemon::add_sinks() {
                     .bridge = link->bridge.get(),
                     .write = [this, &l = *link](std::span<const std::uint8_t> bytes) { write_to_link(l, bytes); }});
   }
-  const LiveContext context{
-      .io = io_,
-      .outputs = *outputs_,
-      .config = config_.outputs,
-      .record_event = [this](std::optional<std::size_t> link, std::string kind, std::string detail,
-                             std::int64_t count) {
-        record([&](Recording& r) {
-          r.store.append_event(r.session, {.link_id = link ? std::optional(links_.at(*link)->store_link) : std::nullopt,
-                                           .mono_ns = mono_now_ns(),
-                                           .wall_ns = wall_now_ns(),
-                                           .kind = std::move(kind),
-                                           .count = count,
-                                           .detail = std::move(detail)});
-        });
-      }};
+  const LiveContext context{.io = io_,
+                            .outputs = *outputs_,
+                            .config = config_.outputs,
+                            .record_event = [this](std::optional<std::size_t> link, std::string kind,
+                                                   std::string detail, std::int64_t count) {
+                              record([&](Recording& r) {
+                                r.store.append_event(
+                                    r.session, {.link_id = link ? std::optional(r.store_links.at(*link)) : std::nullopt,
+                                                .mono_ns = mono_now_ns(),
+                                                .wall_ns = wall_now_ns(),
+                                                .kind = std::move(kind),
+                                                .count = count,
+                                                .detail = std::move(detail)});
+                              });
+                            }};
   for (auto& sink : make_live_sinks(context, live)) sinks_.push_back(std::move(sink));
   for (auto& sink : sinks_) engine_->add_sink(*sink);
 }
 
 Daemon::~Daemon() = default;
-
-pipeline::EstimationStage& Daemon::stage() { return *engine_->stage(); }
 
 int Daemon::run() {
   for (auto& link : links_) link->port->start();
@@ -280,7 +231,7 @@ void Daemon::on_open(Link& link, const std::string& path, bool reopened) {
   std::string detail = path;
   if (reopened && link.lost_at_ns) detail += fmt::format(" after {:.1f} s", (mono - *link.lost_at_ns) * 1e-9);
   record([&](Recording& r) {
-    r.store.append_event(r.session, {.link_id = link.store_link,
+    r.store.append_event(r.session, {.link_id = r.store_links[link.index],
                                      .mono_ns = mono,
                                      .wall_ns = wall_now_ns(),
                                      .kind = reopened ? "reconnect" : "connected",
@@ -312,7 +263,7 @@ void Daemon::request_streams(Link& link) {
 void Daemon::on_lost(Link& link, const std::string& reason) {
   link.lost_at_ns = mono_now_ns();
   record([&](Recording& r) {
-    r.store.append_event(r.session, {.link_id = link.store_link,
+    r.store.append_event(r.session, {.link_id = r.store_links[link.index],
                                      .mono_ns = *link.lost_at_ns,
                                      .wall_ns = wall_now_ns(),
                                      .kind = "link_lost",
@@ -322,13 +273,14 @@ void Daemon::on_lost(Link& link, const std::string& reason) {
 }
 
 void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
-  engine_->on_chunk(link.index, *link.decoding, bytes, mono_now_ns(), wall_now_ns());
+  engine_->on_chunk(link.index, bytes, mono_now_ns(), wall_now_ns());
   if (link.config.format == protocol::WireFormat::mavlink) {
-    const auto imu = link.current_decoder().mavlink_imu();
+    const pipeline::LinkDecoder& decoder = engine_->decoder(link.index);
+    const auto imu = decoder.mavlink_imu();
     if (imu) {
       link.vehicle.emplace(imu->sysid, imu->compid);
     } else if (!link.vehicle) {
-      for (const auto& m : link.current_decoder().mavlink_messages()) {
+      for (const auto& m : decoder.mavlink_messages()) {
         if (m.sysid == link.config.gcs_sysid) continue;  // a ground station's own frames, echoed or bridged
         link.vehicle.emplace(m.sysid, m.compid);
         break;
@@ -348,7 +300,8 @@ void Daemon::write_to_link(Link& link, std::span<const std::uint8_t> bytes) {
   if (!link.port->write(bytes)) return;
   ++link.tx_chunks;
   record([&](Recording& r) {
-    r.store.append_chunk(r.session, link.store_link, store::Direction::tx, mono_now_ns(), wall_now_ns(), bytes);
+    r.store.append_chunk(r.session, r.store_links[link.index], store::Direction::tx, mono_now_ns(), wall_now_ns(),
+                         bytes);
   });
 }
 
@@ -432,9 +385,19 @@ void Daemon::shutdown() {
   stats_timer_.cancel();
   watchdog_timer_.cancel();
   resume_timer_.cancel();
+  finish_links();
   close_recording();
   log_stats();
   io_.stop();
+}
+
+// The end of every link's stream: what the decoders still hold is decoded, estimated and recorded, and sources still
+// deciding their IMU axes release their estimates. Only the recording hears it: it comes too late for the outputs.
+void Daemon::finish_links() {
+  for (std::size_t i = 1; i < sinks_.size(); ++i) engine_->remove_sink(*sinks_[i]);  // sinks_[0]: RecordingSink
+  const std::int64_t mono = mono_now_ns(), wall = wall_now_ns();
+  for (std::size_t i = 0; i < links_.size(); ++i) engine_->finish_link(i, mono, wall);
+  engine_->finish();
 }
 
 std::string Daemon::status_line() const {
@@ -461,9 +424,7 @@ nlohmann::json Daemon::counters() const {
   for (const auto& link : links_) {
     const SerialLink::Counters& port = link->port->counters();
     nlohmann::json decoders = nlohmann::json::object();
-    std::map<std::string, protocol::DecoderCounters> totals = link->retired;
-    for (const auto& [layer, counters] : link->current_decoder().counters()) totals[layer] += counters;
-    for (const auto& [layer, counters] : totals) decoders[layer] = counters;
+    for (const auto& [layer, counters] : engine_->decoder(link->index).counters()) decoders[layer] = counters;
     nlohmann::json j{{"device", link->port->is_open() ? nlohmann::json(link->port->path()) : nlohmann::json()},
                      {"bytes_read", port.bytes_read},
                      {"reads", port.reads},

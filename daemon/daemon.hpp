@@ -1,9 +1,9 @@
 #pragma once
 // `imubridge run`: the ground-station daemon. One io_context thread serves every link: each chunk a port returns goes
-// through the session engine (pipeline/session_engine.hpp), as replay's chunks do: recorded (raw bytes, samples,
-// losses: pipeline::LinkRecorder), estimated (into this session's live run), and handed to the sinks: the link's
-// bridge and feedback, and the outputs (daemon/live_sinks.hpp). Operations (signals, systemd,
-// storage limits, logs): docs/operations.md.
+// through the session engine (pipeline/session_engine.hpp), as replay's chunks do: decoded and estimated, then handed
+// to the sinks: the recording (raw bytes, samples, losses and the live run's estimates: pipeline::SessionRecording,
+// while there is one), the link's bridge and feedback, and the outputs (daemon/live_sinks.hpp). Operations (signals,
+// systemd, storage limits, logs): docs/operations.md.
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -54,7 +54,6 @@ class Daemon {
  private:
   struct Link;
   struct Recording;
-  class LinkDecoding;
   class RecordingSink;
 
   // Why the daemon is not recording, and where it records again once it can.
@@ -82,10 +81,9 @@ class Daemon {
   template <typename Write>
   void record(Write&& write);
 
-  // Construction's steps: each link's declared axes and what is done once they are resolved, for the engine's
-  // stage; a link's port, bridge and feedback; the engine's sinks, the daemon's own first.
-  estimator::ImuAxes declared_axes(protocol::LinkId id) const;
-  void on_axes_resolved(protocol::LinkId id, const estimator::AxesResolution& resolution);
+  // Construction's steps: what is done once a source's axes are resolved, for the engine's stage; a link's decoder,
+  // port, bridge and feedback; the engine's sinks, the daemon's own first.
+  void on_axes_resolved(const protocol::SourceKey& source, const estimator::AxesResolution& resolution);
   void add_link(const LinkConfig& link_config);
   void add_sinks();
 
@@ -94,9 +92,6 @@ class Daemon {
   void on_lost(Link& link, const std::string& reason);
   void on_data(Link& link, std::span<const std::uint8_t> bytes);
   void write_to_link(Link& link, std::span<const std::uint8_t> bytes);
-  void use_decoders();
-  // The engine's stage: the daemon's engine always estimates (without parameters, the specific force alone).
-  pipeline::EstimationStage& stage();
 
   void wait_for_signal();
   void reload();
@@ -107,6 +102,7 @@ class Daemon {
   void log_stats() const;
   void watchdog_tick();
   void shutdown();
+  void finish_links();
   std::string status_line() const;
 
   Config config_;

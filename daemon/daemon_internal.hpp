@@ -11,13 +11,13 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "daemon/bridge.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/serial_link.hpp"
 #include "daemon/vehicle_feedback.hpp"
-#include "pipeline/link_decoder.hpp"
-#include "pipeline/record_and_decode.hpp"
+#include "pipeline/link_recorder.hpp"
 #include "pipeline/session_engine.hpp"
 #include "store/store.hpp"
 
@@ -55,7 +55,10 @@ struct Daemon::Recording {
                                         .background_checkpoint = std::chrono::seconds(1)}) {}
   fs::path path;
   store::Store store;
-  std::int64_t session = 0, run = 0;
+  std::int64_t session = 0;
+  std::vector<std::int64_t> store_links;  // by link index
+  // The engine's sink that stores what it hears; the daemon's RecordingSink hands it on while recording.
+  std::unique_ptr<pipeline::SessionRecording> sink;
   Clock::time_point since = Clock::now();
 
   // As notes name it in the session that continues it: "imubridge.db session 4".
@@ -63,33 +66,19 @@ struct Daemon::Recording {
 };
 
 struct Daemon::Link {
-  std::size_t index = 0;  // in links_, and the engine's link number
+  std::size_t index = 0;  // in links_, and the engine's link number (protocol::SourceKey::link)
   LinkConfig config;
   std::unique_ptr<SerialLink> port;
   std::unique_ptr<LinkBridge> bridge;
   std::optional<VehicleFeedback> feedback;
-  std::int64_t store_link = 0;  // in the current recording; also the link id of its samples while not recording
-  std::optional<pipeline::RecordAndDecode> recorder;         // while recording: stores what it decodes
-  std::unique_ptr<pipeline::LinkDecoder> decoder;            // while not: the samples still reach estimates and outputs
-  std::map<std::string, protocol::DecoderCounters> retired;  // counts of decoders a rotation or a stop replaced
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
   std::optional<protocol::mavlink::ImuSource> logged_imu;  // the IMU a MAVLink link locked on, once logged
   // A MAVLink link's vehicle (system, component) once heard: the IMU's sender, else the first other than us. Stream
   // requests target it; before it is heard they are broadcast (0, 0).
   std::optional<std::pair<std::uint8_t, std::uint8_t>> vehicle;
-  std::uint8_t gcs_seq = 0;                                // our frames' sequence numbers
-  std::map<protocol::LinkId, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
-  std::unique_ptr<pipeline::ChunkDecoding> decoding;       // recorder or decoder, whichever the link has now
-
-  const pipeline::LinkDecoder& current_decoder() const { return recorder ? recorder->decoder() : *decoder; }
-  void retire_decoder() {
-    if (!recorder && !decoder) return;
-    for (const auto& [layer, counters] : current_decoder().counters()) retired[layer] += counters;
-    recorder.reset();
-    decoder.reset();
-    clock_epochs.clear();  // a new decoder counts restarts from 0
-  }
+  std::uint8_t gcs_seq = 0;                                   // our frames' sequence numbers
+  std::map<protocol::SourceKey, std::uint32_t> clock_epochs;  // by sample stream (an XBee link has one per radio)
 };
 
 template <typename Write>

@@ -28,8 +28,8 @@ void FeedbackSink::on_sample(std::size_t link, const protocol::Sample&, std::spa
 
 BridgeSink::BridgeSink(std::size_t link, LinkBridge& bridge) : link_(link), bridge_(bridge) {}
 
-void BridgeSink::on_bytes(std::size_t link, std::span<const std::uint8_t> bytes, std::int64_t) {
-  if (link == link_) bridge_.from_link(bytes);
+void BridgeSink::on_chunk(std::size_t link, const pipeline::DecodedChunk& chunk) {
+  if (link == link_ && !chunk.bytes.empty()) bridge_.from_link(chunk.bytes);
 }
 
 std::vector<std::unique_ptr<pipeline::SessionSink>> make_live_sinks(const LiveContext& context,

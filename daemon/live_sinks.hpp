@@ -50,7 +50,7 @@ class FeedbackSink final : public pipeline::SessionSink {
 class BridgeSink final : public pipeline::SessionSink {
  public:
   BridgeSink(std::size_t link, LinkBridge& bridge);
-  void on_bytes(std::size_t link, std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns) override;
+  void on_chunk(std::size_t link, const pipeline::DecodedChunk& chunk) override;
 
  private:
   std::size_t link_;

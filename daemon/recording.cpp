@@ -8,7 +8,6 @@
 #include "daemon/config_file.hpp"
 #include "daemon/daemon_internal.hpp"
 #include "daemon/port_list.hpp"
-#include "pipeline/radio_link.hpp"
 #include "pipeline/recorded_session.hpp"
 
 namespace imubridge::daemon {
@@ -61,7 +60,7 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
     const LinkConfig& c = link->config;
     // A MAVLink link that has locked on its IMU keeps to it in the new session (a rotation, a resumed recording),
     // recorded as that IMU; else the session records the rule it will lock by.
-    const auto locked = c.format == protocol::WireFormat::mavlink ? link->logged_imu : std::nullopt;
+    const auto locked = engine_->decoder(link->index).mavlink_imu();
     links.push_back({.recorded = {.name = c.name,
                                   .format = c.format,
                                   .calibration = c.calibration,
@@ -92,16 +91,11 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
                                                                       .note_mono_ns = mono_now_ns(),
                                                                       .estimated_with = params_},
                                                                      links);
+  // Nothing below throws: the recording begins, or (above) nothing does. The decoders and filters run on: what
+  // they hear from now on goes to the new file's store links.
   r->session = begun.id;
-  r->run = *begun.run;
-  // Nothing below throws: every link switches to the new file, or (above) none does.
-  for (std::size_t i = 0; i < links_.size(); ++i) {
-    links_[i]->retire_decoder();
-    links_[i]->store_link = begun.store_links[i];
-    links_[i]->recorder.emplace(std::move(begun.recorders[i]));
-  }
-  // Link ids are the new file's: estimator state keyed by the old ones would never be used again.
-  engine_->replace_stage(std::make_unique<pipeline::EstimationStage>(params_, *stage().axes()));
+  r->store_links = begun.store_links;
+  r->sink = std::make_unique<pipeline::SessionRecording>(r->store, begun, links, *engine_);
   spdlog::info("recording session {} into {}{}{}", r->session, path.string(),
                config_.params ? " with parameters from " + config_.params->string()
                               : " (no parameters: velocity is not estimated)",
@@ -110,46 +104,17 @@ void Daemon::open_recording(const fs::path& path, const std::string& note) {
   not_recording_.reset();
 }
 
-// Ends the session as cleanly as the store still allows. The decoders' last frames are recorded and estimated (they
-// come too late for the outputs).
+// Ends the session as cleanly as the store still allows: each link's counters and reference rows so far (the
+// decoders go on; at shutdown they have finished first, their last samples recorded).
 void Daemon::close_recording() {
   if (!recording_) return;
   std::unique_ptr<Recording> r = std::move(recording_);  // from here on record() writes nothing
-  const std::int64_t mono = mono_now_ns(), wall = wall_now_ns();
-  std::vector<protocol::Sample> tail;
   try {
-    for (auto& link : links_) {
-      tail.clear();
-      link->decoding->finish(mono, wall, tail);
-      std::vector<store::Estimate> estimates;
-      for (const auto& sample : tail) stage().update(sample, estimates);
-      stage().finish(estimates);  // links still waiting for their axes
-      for (const auto& estimate : estimates) r->store.append_estimate(r->run, estimate);
-    }
-    pipeline::end_recorded_session(r->store, r->session, wall);
+    r->sink->end(*engine_, mono_now_ns(), wall_now_ns());
+    pipeline::end_recorded_session(r->store, r->session, wall_now_ns());
     spdlog::info("session {} in {} ended", r->session, r->path.string());
   } catch (const store::StoreError& e) {
     spdlog::warn("session {} in {} could not be ended cleanly: {}", r->session, r->path.string(), e.what());
-  }
-  use_decoders();
-}
-
-void Daemon::use_decoders() {
-  for (std::uint32_t i = 0; i < links_.size(); ++i) {
-    Link& link = *links_[i];
-    if (link.decoder) continue;
-    link.retire_decoder();
-    // Each XBee radio gets a link id of its own, above any store link's, so no estimator mixes two vehicles.
-    link.decoder = std::make_unique<pipeline::LinkDecoder>(
-        link.config.format, link.store_link, link.config.calibration,
-        [radios = std::map<std::uint64_t, protocol::LinkId>(), i](std::uint64_t source64) mutable {
-          const auto id = pipeline::unrecorded_radio_id(i, static_cast<std::uint32_t>(radios.size()));
-          return radios.try_emplace(source64, id).first->second;
-        },
-        link.config.format == protocol::WireFormat::mavlink ? link.logged_imu : std::nullopt);
-    if (const auto lock = mavlink_imu_lock(link.config); lock && !link.decoder->mavlink_imu()) {
-      link.decoder->lock_mavlink_imu(*lock);
-    }
   }
 }
 

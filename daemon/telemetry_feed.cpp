@@ -41,12 +41,11 @@ TelemetryFeed::TelemetryFeed(const std::vector<LiveLink>& links, std::optional<d
   }
 }
 
-TelemetryFeed::Stream& TelemetryFeed::stream_of(std::size_t link, const protocol::Sample& sample) {
+TelemetryFeed::Stream& TelemetryFeed::stream_of(const protocol::Sample& sample) {
   for (Stream& stream : streams_) {
-    if (stream.link == link && stream.link_id == sample.link_id) return stream;
+    if (stream.source == sample.source) return stream;
   }
-  return streams_.emplace_back(Stream{.link = link,
-                                      .link_id = sample.link_id,
+  return streams_.emplace_back(Stream{.source = sample.source,
                                       .last_seq = sample.seq,
                                       .clock_epoch = sample.clock_epoch,
                                       .next_sample_us = std::nullopt,
@@ -63,7 +62,7 @@ void TelemetryFeed::on_sample(std::size_t link, const protocol::Sample& sample,
     wall_minus_mono_at_ns_ = recv_mono_ns;
   }
   const std::int64_t recv_wall_ns = recv_mono_ns + *wall_minus_mono_ns_;
-  Stream& stream = stream_of(link, sample);
+  Stream& stream = stream_of(sample);
   if (sample.clock_epoch != stream.clock_epoch) {
     emit_(link, Kind::event,
           event_payload(link, "device_restart", 1, "the device's sequence number and clock went back",

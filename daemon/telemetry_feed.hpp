@@ -40,13 +40,12 @@ class TelemetryFeed {
  private:
   // One stream of samples: a link, or one radio of an XBee link. Caps and gaps are per stream.
   struct Stream {
-    std::size_t link;
-    protocol::LinkId link_id;
+    protocol::SourceKey source;
     std::uint64_t last_seq;
     std::uint32_t clock_epoch;
     std::optional<std::int64_t> next_sample_us, next_estimate_us;  // device time the next one may go at
   };
-  Stream& stream_of(std::size_t link, const protocol::Sample& sample);
+  Stream& stream_of(const protocol::Sample& sample);
 
   std::vector<std::string> link_names_;
   // By link: whether a jump of the sequence number means samples were lost. Not on MAVLink, whose sequence numbers

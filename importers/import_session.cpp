@@ -17,25 +17,37 @@ std::string describe(const ImportProblem& problem) {
          ": " + problem.why + (problem.where ? " (" + *problem.where + ")" : "");
 }
 
+namespace {
+
+// The engine with the import's one link added, for the recording that begins with it.
+const pipeline::SessionEngine& with_link(pipeline::SessionEngine& engine, const pipeline::RecordedLink& link) {
+  engine.add_link(pipeline::make_decoder(link));
+  return engine;
+}
+
+}  // namespace
+
 ImportSession::ImportSession(store::Store& store, const pipeline::SessionStart& start,
                              const pipeline::SessionLink& link, ProblemCallback on_problem)
-    : ImportSession(store, pipeline::begin_recorded_session(store, start, {link}), std::move(on_problem)) {}
+    : ImportSession(store, link, pipeline::begin_recorded_session(store, start, {link}), std::move(on_problem)) {}
 
-ImportSession::ImportSession(store::Store& store, pipeline::RecordedSession recorded, ProblemCallback on_problem)
+ImportSession::ImportSession(store::Store& store, const pipeline::SessionLink& link, pipeline::RecordedSession recorded,
+                             ProblemCallback on_problem)
     : store_(store),
       id_(recorded.id),
       link_(recorded.store_links[0]),
-      recorder_(*recorded.recorders[0]),
-      recording_(std::move(recorded.recorders[0])),
-      on_problem_(std::move(on_problem)) {}
+      recording_(store, recorded, {link}, with_link(engine_, link.recorded)),
+      on_problem_(std::move(on_problem)) {
+  engine_.add_sink(recording_);
+}
 
 void ImportSession::feed(std::span<const std::uint8_t> bytes, std::int64_t mono_ns, std::int64_t wall_ns) {
-  engine_.on_chunk(0, recording_, bytes, mono_ns, wall_ns);
+  engine_.on_chunk(0, bytes, mono_ns, wall_ns);
   store_.commit_if_due(std::chrono::steady_clock::now());
 }
 
 void ImportSession::finish_link(std::int64_t mono_ns, std::int64_t wall_ns) {
-  engine_.finish_link(0, recording_, mono_ns, wall_ns);
+  engine_.finish_link(0, mono_ns, wall_ns);
   engine_.finish();
 }
 

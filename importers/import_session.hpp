@@ -11,8 +11,9 @@
 #include "estimator/imu_axes.hpp"
 #include "importers/import_problem.hpp"
 #include "importers/log_import.hpp"
-#include "pipeline/record_and_decode.hpp"
+#include "pipeline/link_recorder.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_config.hpp"
 #include "pipeline/session_engine.hpp"
 #include "store/store.hpp"
 
@@ -40,7 +41,8 @@ class ImportSession {
 
   std::int64_t id() const { return id_; }
   std::int64_t link() const { return link_; }
-  const pipeline::LinkRecorder& recorder() const { return recorder_; }
+  const pipeline::LinkRecorder& recorder() const { return recording_.link(0); }
+  // After the recording, which is the engine's first sink.
   void add_sink(pipeline::SessionSink& sink) { engine_.add_sink(sink); }
 
   // One chunk of the link's bytes, as received at these times; the store commits when due.
@@ -65,13 +67,13 @@ class ImportSession {
  private:
   void store_event(const EventAt& at, std::string kind, std::int64_t count, std::string detail);
 
-  ImportSession(store::Store& store, pipeline::RecordedSession recorded, ProblemCallback on_problem);
+  ImportSession(store::Store& store, const pipeline::SessionLink& link, pipeline::RecordedSession recorded,
+                ProblemCallback on_problem);
 
   store::Store& store_;
   std::int64_t id_ = 0, link_ = 0;
-  const pipeline::LinkRecorder& recorder_;
-  pipeline::RecordAndDecode recording_;
   pipeline::SessionEngine engine_{nullptr};
+  pipeline::SessionRecording recording_;
   ProblemCallback on_problem_;
   std::int64_t latest_event_ns_ = 0;
 };

@@ -25,34 +25,32 @@ EstimationStage::EstimationStage(const estimator::ModelParams& params, const est
 
 int EstimationStage::delay_samples() const { return (config_.differentiator_window - 1) / 2; }
 
-EstimationStage::LinkState& EstimationStage::link(protocol::LinkId id) {
-  auto it = links_.find(id);
+EstimationStage::LinkState& EstimationStage::link(const protocol::SourceKey& source) {
+  auto it = links_.find(source);
   if (it != links_.end()) return it->second;
   LinkState state{estimator::DragVelocityEstimator(params_.full, config_), {}};
   if (axes_) {
-    const auto declared = axes_->links.find(id);
-    state.declared = axes_->declared                  ? axes_->declared(id)
-                     : declared != axes_->links.end() ? declared->second
-                                                      : axes_->others;
+    const auto declared = axes_->links.find(source.link);
+    state.declared = declared != axes_->links.end() ? declared->second : axes_->others;
     state.detector.emplace();
     if (!state.declared.automatic) {
       state.imu_to_body = state.declared.imu_to_body;
       state.rotate = !estimator::is_identity(state.declared);
     }
   }
-  return links_.emplace(id, std::move(state)).first->second;
+  return links_.emplace(source, std::move(state)).first->second;
 }
 
-void EstimationStage::resolve(protocol::LinkId id, LinkState& link) {
+void EstimationStage::resolve(const protocol::SourceKey& source, LinkState& link) {
   const estimator::AxesResolution resolution = estimator::resolve_axes(link.declared, link.detector->result());
   link.detector.reset();
   link.imu_to_body = resolution.axes.imu_to_body;
   link.rotate = !estimator::is_identity(resolution.axes);
-  if (axes_->on_resolved) axes_->on_resolved(id, resolution);
+  if (axes_->on_resolved) axes_->on_resolved(source, resolution);
 }
 
 void EstimationStage::update(const protocol::Sample& sample, std::vector<store::Estimate>& out) {
-  LinkState& state = link(sample.link_id);
+  LinkState& state = link(sample.source);
   if (state.detector) {
     const Eigen::Vector3d accel(sample.accel[0], sample.accel[1], sample.accel[2]);
     const Eigen::Vector3d gyro(sample.gyro[0], sample.gyro[1], sample.gyro[2]);
@@ -62,7 +60,7 @@ void EstimationStage::update(const protocol::Sample& sample, std::vector<store::
     if (state.declared.automatic) {
       state.waiting.push_back(sample);
       if (!decided) return;
-      resolve(sample.link_id, state);
+      resolve(sample.source, state);
       std::vector<protocol::Sample> waiting = std::move(state.waiting);
       state.waiting = {};
       for (const protocol::Sample& s : waiting) {
@@ -70,7 +68,7 @@ void EstimationStage::update(const protocol::Sample& sample, std::vector<store::
       }
       return;
     }
-    if (decided) resolve(sample.link_id, state);
+    if (decided) resolve(sample.source, state);
   }
   if (auto e = estimate(state, sample)) out.push_back(*e);
 }
@@ -86,7 +84,14 @@ std::optional<store::Estimate> EstimationStage::update(const protocol::Sample& s
 }
 
 void EstimationStage::finish(std::vector<store::Estimate>& out) {
-  for (auto& [id, state] : links_) {
+  finish([&out](const protocol::SourceKey&, std::span<const store::Estimate> estimates) {
+    out.insert(out.end(), estimates.begin(), estimates.end());
+  });
+}
+
+void EstimationStage::finish(const Released& released) {
+  std::vector<store::Estimate> out;
+  for (auto& [source, state] : links_) {
     if (!state.detector) continue;
     if (!state.detector->decided()) {
       // Decide on the mean specific force of what came: the detector's own flight rule, applied early.
@@ -105,15 +110,17 @@ void EstimationStage::finish(std::vector<store::Estimate>& out) {
       state.detector.reset();
       state.imu_to_body = resolution.axes.imu_to_body;
       state.rotate = !estimator::is_identity(resolution.axes);
-      if (axes_->on_resolved) axes_->on_resolved(id, resolution);
+      if (axes_->on_resolved) axes_->on_resolved(source, resolution);
     } else {
-      resolve(id, state);
+      resolve(source, state);
     }
     std::vector<protocol::Sample> waiting = std::move(state.waiting);
     state.waiting = {};
+    out.clear();
     for (const protocol::Sample& s : waiting) {
       if (auto e = estimate(state, s)) out.push_back(*e);
     }
+    if (!out.empty()) released(source, out);
   }
 }
 
@@ -149,8 +156,7 @@ std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const 
   if (link.pending.empty() || link.pending.front().first != estimate->t) return std::nullopt;
   const std::uint64_t seq = link.pending.front().second;
   link.pending.pop_front();
-  return store::Estimate{.link_id = sample.link_id,
-                         .seq = seq,
+  return store::Estimate{.seq = seq,
                          .t_s = estimate->t,
                          .fx = estimate->f.x(),
                          .fy = estimate->f.y(),

@@ -1,13 +1,15 @@
 #pragma once
-// Samples -> estimates: lever-arm compensation and the drag-velocity estimator, one estimator per link (samples of
-// different vehicles never mix). Live runs and replay drive this same object, so the same samples and parameters
-// give bit-identical estimates.
+// Samples -> estimates: lever-arm compensation and the drag-velocity estimator, one estimator per stream of samples
+// (protocol::SourceKey: a link, or one XBee radio of it), so samples of different vehicles never mix. Live runs and
+// replay drive this same object, so the same samples and parameters give bit-identical estimates. Estimates leave with
+// no store link (link_id 0): they belong to their sample's source, and whoever stores them knows its store link.
 #include <Eigen/Core>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "estimator/drag_velocity.hpp"
@@ -24,13 +26,12 @@ namespace imubridge::pipeline {
 // is lost, and the same samples give the same estimates bit for bit. Declared links are checked against gravity the
 // same way without waiting.
 struct StageAxes {
-  std::map<protocol::LinkId, estimator::ImuAxes> links{};  // by link id
-  estimator::ImuAxes others = estimator::auto_axes();      // links not listed
-  // When set, asked instead of `links` and `others` (for link ids made on the fly, such as one per XBee radio).
-  std::function<estimator::ImuAxes(protocol::LinkId link)> declared{};
-  // Called once per link when its axes are resolved (auto) or checked (declared); resolution.mismatch says the
+  // By the link's index (SourceKey::link): an XBee radio's IMU sits as declared for the link it is heard through.
+  std::map<std::uint32_t, estimator::ImuAxes> links{};
+  estimator::ImuAxes others = estimator::auto_axes();  // links not listed
+  // Called once per source when its axes are resolved (auto) or checked (declared); resolution.mismatch says the
   // data disagree with a declaration.
-  std::function<void(protocol::LinkId link, const estimator::AxesResolution& resolution)> on_resolved{};
+  std::function<void(const protocol::SourceKey& source, const estimator::AxesResolution& resolution)> on_resolved{};
 };
 
 class EstimationStage {
@@ -49,7 +50,11 @@ class EstimationStage {
   // The same for a stage whose links never wait (no auto link): at most one estimate per sample. Throws
   // std::logic_error if a waiting link released more than one (use the overload above).
   std::optional<store::Estimate> update(const protocol::Sample& sample);
-  // End of data: links still waiting decide on what they have (the mean specific force) and release their samples.
+  // End of data: links still waiting decide on what they have (the mean specific force) and release their samples'
+  // estimates, given to `released` source by source.
+  using Released = std::function<void(const protocol::SourceKey& source, std::span<const store::Estimate> estimates)>;
+  void finish(const Released& released);
+  // The same, every source's estimates appended to `out`.
   void finish(std::vector<store::Estimate>& out);
 
   const estimator::ModelParams& params() const { return params_; }
@@ -65,18 +70,18 @@ class EstimationStage {
     bool rotate = false;                              // imu_to_body is not the identity
     std::optional<estimator::UpDetector> detector{};  // until the axes are resolved or checked
     std::vector<protocol::Sample> waiting{};          // an auto link's samples until its axes are decided
-    protocol::LinkId clock_epoch = 0;                 // the device's restarts so far (protocol::Sample)
+    std::uint32_t clock_epoch = 0;                    // the device's restarts so far (protocol::Sample)
     std::optional<std::int64_t> last_recv_mono_ns{};
   };
 
-  LinkState& link(protocol::LinkId id);
-  void resolve(protocol::LinkId id, LinkState& link);
+  LinkState& link(const protocol::SourceKey& source);
+  void resolve(const protocol::SourceKey& source, LinkState& link);
   std::optional<store::Estimate> estimate(LinkState& link, const protocol::Sample& sample);
 
   estimator::ModelParams params_;
   estimator::DragVelocityConfig config_;
   std::optional<StageAxes> axes_;
-  std::map<protocol::LinkId, LinkState> links_;
+  std::map<protocol::SourceKey, LinkState> links_;
 };
 
 }  // namespace imubridge::pipeline

@@ -1,5 +1,6 @@
 #include "pipeline/link_decoder.hpp"
 
+#include <algorithm>
 #include <array>
 #include <map>
 #include <stdexcept>
@@ -37,6 +38,7 @@ struct XbeeLink {
   protocol::XbeeImuReassembler reassembler;
   std::vector<protocol::xbee::Frame> frames;
   std::vector<protocol::XbeeImuReassembler::SourcedFrame> imu_frames;
+  std::vector<std::uint64_t> radios;  // in the order first heard
 };
 
 struct MavlinkLink {
@@ -49,17 +51,15 @@ struct MavlinkLink {
 
 struct LinkDecoder::Impl {
   protocol::WireFormat format;
-  protocol::LinkId link_id;
   protocol::Calibration calibration;
-  SourceResolver resolve_source;
   std::optional<protocol::mavlink::ImuSource> mavlink_imu;
   std::optional<MavlinkImuLock> lock{};
   std::variant<ImuLink, XbeeLink, MavlinkLink> link;
   std::uint64_t frames_without_sample = 0;
 
-  void emit(const protocol::imu::Frame& frame, protocol::LinkId link, std::int64_t t,
+  void emit(const protocol::imu::Frame& frame, const protocol::SourceKey& source, std::int64_t t,
             std::vector<protocol::Sample>& out) {
-    if (auto sample = protocol::to_sample(frame, calibration, link, t)) {
+    if (auto sample = protocol::to_sample(frame, calibration, source, t)) {
       out.push_back(*sample);
     } else {
       ++frames_without_sample;
@@ -67,7 +67,7 @@ struct LinkDecoder::Impl {
   }
 
   void take(ImuLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
-    for (const auto& frame : l.frames) emit(frame, link_id, t, out);
+    for (const auto& frame : l.frames) emit(frame, {}, t, out);
   }
 
   void take(XbeeLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
@@ -85,7 +85,10 @@ struct LinkDecoder::Impl {
 
   void take_sourced(XbeeLink& l, std::int64_t t, std::vector<protocol::Sample>& out) {
     for (const auto& sourced : l.imu_frames) {
-      emit(sourced.frame, resolve_source ? resolve_source(sourced.source64) : link_id, t, out);
+      if (std::find(l.radios.begin(), l.radios.end(), sourced.source64) == l.radios.end()) {
+        l.radios.push_back(sourced.source64);
+      }
+      emit(sourced.frame, {.radio = sourced.source64}, t, out);
     }
   }
 
@@ -102,7 +105,6 @@ struct LinkDecoder::Impl {
         ++frames_without_sample;
         continue;
       }
-      sample->link_id = link_id;
       sample->seq = sequence;
       sample->recv_mono_ns = t;
       out.push_back(*sample);
@@ -110,11 +112,9 @@ struct LinkDecoder::Impl {
   }
 };
 
-LinkDecoder::LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id,
-                         const protocol::Calibration& calibration, SourceResolver resolve_source,
+LinkDecoder::LinkDecoder(protocol::WireFormat format, const protocol::Calibration& calibration,
                          std::optional<protocol::mavlink::ImuSource> mavlink_imu)
-    : impl_(std::make_unique<Impl>(
-          Impl{format, link_id, calibration, std::move(resolve_source), mavlink_imu, std::nullopt, ImuLink{}, 0})) {
+    : impl_(std::make_unique<Impl>(Impl{format, calibration, mavlink_imu, std::nullopt, ImuLink{}, 0})) {
   if (!calibration.valid()) throw std::invalid_argument("invalid calibration (axis map, signs or scales)");
   switch (format) {
     case protocol::WireFormat::imubridge:
@@ -137,6 +137,12 @@ LinkDecoder& LinkDecoder::operator=(LinkDecoder&&) noexcept = default;
 
 void LinkDecoder::lock_mavlink_imu(const MavlinkImuLock& lock) { impl_->lock = lock; }
 std::optional<protocol::mavlink::ImuSource> LinkDecoder::mavlink_imu() const { return impl_->mavlink_imu; }
+bool LinkDecoder::awaiting_mavlink_imu() const { return impl_->lock && !impl_->mavlink_imu; }
+
+std::span<const std::uint64_t> LinkDecoder::radios() const {
+  const auto* l = std::get_if<XbeeLink>(&impl_->link);
+  return l ? std::span<const std::uint64_t>(l->radios) : std::span<const std::uint64_t>();
+}
 
 std::span<const protocol::mavlink::Message> LinkDecoder::mavlink_messages() const {
   const auto* l = std::get_if<MavlinkLink>(&impl_->link);

@@ -2,7 +2,6 @@
 // Bytes -> samples for one serial link: the protocol's decoder, the calibration, and sequence numbers unwrapped to
 // 64 bits. Live runs feed it the chunks read from a port; replay feeds it the same chunks from the store.
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -33,14 +32,12 @@ struct MavlinkImuLock {
 
 class LinkDecoder {
  public:
-  // On an XBee link every radio (64-bit source address) is a sample stream of its own; the resolver gives the link id
-  // its samples carry (the recorder makes one store link per radio). Without a resolver they all carry link_id.
-  using SourceResolver = std::function<protocol::LinkId(std::uint64_t source64)>;
-
+  // Samples come out keyed by their XBee radio (SourceKey::radio) on an XBee link, where every radio (64-bit source
+  // address) is a stream of its own; SourceKey::link is the engine's to set (SessionEngine keeps one decoder per link).
   // On a MAVLink link every IMU message gives a sample unless `mavlink_imu` names the one IMU to take samples from;
   // the others' messages then count as frames without a sample, like ATTITUDE.
-  LinkDecoder(protocol::WireFormat format, protocol::LinkId link_id, const protocol::Calibration& calibration,
-              SourceResolver resolve_source = {}, std::optional<protocol::mavlink::ImuSource> mavlink_imu = {});
+  LinkDecoder(protocol::WireFormat format, const protocol::Calibration& calibration,
+              std::optional<protocol::mavlink::ImuSource> mavlink_imu = {});
   ~LinkDecoder();
   LinkDecoder(LinkDecoder&&) noexcept;
   LinkDecoder& operator=(LinkDecoder&&) noexcept;
@@ -50,6 +47,11 @@ class LinkDecoder {
   void lock_mavlink_imu(const MavlinkImuLock& lock);
   // The one IMU a MAVLink link takes samples from: the fixed one, or the one it locked on; none before that.
   std::optional<protocol::mavlink::ImuSource> mavlink_imu() const;
+  // A lock is set and has not found its IMU yet.
+  bool awaiting_mavlink_imu() const;
+
+  // The XBee radios heard so far (any frame of theirs), in the order each was first heard; empty on other links.
+  std::span<const std::uint64_t> radios() const;
 
   // A MAVLink link's messages of the last feed() or finish(), each whole and checked; empty on other links.
   std::span<const protocol::mavlink::Message> mavlink_messages() const;

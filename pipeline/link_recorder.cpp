@@ -13,55 +13,73 @@ protocol::DecoderCounters total(const LinkDecoder& decoder) {
   return sum;
 }
 
+// What a decoder counted since `before`: a recording that began after its decoder counts only its own share.
+protocol::DecoderCounters since(const protocol::DecoderCounters& now, const protocol::DecoderCounters& before) {
+  return {.bytes_in = now.bytes_in - before.bytes_in,
+          .frames_out = now.frames_out - before.frames_out,
+          .crc_failures = now.crc_failures - before.crc_failures,
+          .resyncs = now.resyncs - before.resyncs,
+          .bytes_discarded = now.bytes_discarded - before.bytes_discarded,
+          .sequence_gaps = now.sequence_gaps - before.sequence_gaps,
+          .frames_lost = now.frames_lost - before.frames_lost,
+          .duplicates = now.duplicates - before.duplicates,
+          .device_restarts = now.device_restarts - before.device_restarts,
+          .unsupported = now.unsupported - before.unsupported,
+          .unverified = now.unverified - before.unverified};
+}
+
 }  // namespace
 
-LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64_t link_id, std::string link_name,
-                           protocol::WireFormat format, const protocol::Calibration& calibration,
-                           std::optional<protocol::mavlink::ImuSource> mavlink_imu)
+LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64_t row, std::string name,
+                           const LinkDecoder& decoder)
     : store_(store),
       session_(session),
-      link_id_(link_id),
-      link_name_(std::move(link_name)),
-      format_name_(protocol::wire_format_name(format)),
-      decoder_(
-          format, link_id, calibration,
-          [this](std::uint64_t source64) {
-            auto [it, added] = radio_links_.try_emplace(source64, 0);
-            if (added) {
-              it->second = store_.add_link(session_, radio_link_name(link_name_, source64), format_name_,
-                                           radio_link_description(link_name_, source64));
-            }
-            return it->second;
-          },
-          mavlink_imu) {}
+      row_(row),
+      name_(std::move(name)),
+      format_name_(protocol::wire_format_name(decoder.format())),
+      radios_seen_(decoder.radios().size()),
+      lock_pending_(decoder.awaiting_mavlink_imu()),
+      counted_before_(decoder.counters()),
+      without_sample_before_(decoder.frames_without_sample()),
+      recorded_(total(decoder)) {}
 
-void LinkRecorder::lock_mavlink_imu(const MavlinkImuLock& lock) {
-  decoder_.lock_mavlink_imu(lock);
-  lock_pending_ = !decoder_.mavlink_imu();
+std::int64_t LinkRecorder::row(const std::optional<std::uint64_t>& radio) {
+  if (!radio) return row_;
+  auto [it, added] = radio_rows_.try_emplace(*radio, 0);
+  if (added) {
+    it->second =
+        store_.add_link(session_, radio_link_name(name_, *radio), format_name_, radio_link_description(name_, *radio));
+  }
+  return it->second;
 }
 
-void LinkRecorder::on_chunk(std::span<const std::uint8_t> bytes, std::int64_t recv_mono_ns, std::int64_t recv_wall_ns,
-                            std::vector<protocol::Sample>& samples) {
-  store_.append_chunk(session_, link_id_, store::Direction::rx, recv_mono_ns, recv_wall_ns, bytes);
-  const std::size_t first = samples.size();
-  decoder_.feed(bytes, recv_mono_ns, samples);
-  record_lock(recv_mono_ns, recv_wall_ns);
-  record_reference(recv_mono_ns, false);
-  store_samples(first, samples);
-  record_losses(recv_mono_ns, recv_wall_ns);
+// A radio gets its store link when first heard, whether or not that frame carried a sample.
+void LinkRecorder::add_new_radios(const LinkDecoder& decoder) {
+  const auto radios = decoder.radios();
+  for (; radios_seen_ < radios.size(); ++radios_seen_) row(radios[radios_seen_]);
 }
 
-void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vector<protocol::Sample>& samples) {
-  const std::size_t first = samples.size();
-  decoder_.finish(mono_ns, samples);
-  record_lock(mono_ns, wall_ns);
-  record_reference(mono_ns, true);
-  store_samples(first, samples);
-  record_losses(mono_ns, wall_ns);
+void LinkRecorder::on_chunk(const DecodedChunk& chunk) {
+  if (!chunk.end) {
+    store_.append_chunk(session_, row_, store::Direction::rx, chunk.recv_mono_ns, chunk.recv_wall_ns, chunk.bytes);
+  }
+  add_new_radios(chunk.decoder);
+  record_lock(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
+  record_reference(chunk.decoder, chunk.recv_mono_ns, false);
+  store_samples(chunk.samples);
+  record_losses(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
+  if (chunk.end) end(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
+}
+
+void LinkRecorder::end(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns) {
+  if (ended_) return;
+  ended_ = true;
+  record_reference(decoder, mono_ns, true);
   nlohmann::json counters;
-  for (const auto& [layer, c] : decoder_.counters()) counters[layer] = c;
-  counters["frames_without_sample"] = decoder_.frames_without_sample();
-  store_.append_event(session_, {.link_id = link_id_,
+  const auto now = decoder.counters();
+  for (std::size_t i = 0; i < now.size(); ++i) counters[now[i].first] = since(now[i].second, counted_before_[i].second);
+  counters["frames_without_sample"] = decoder.frames_without_sample() - without_sample_before_;
+  store_.append_event(session_, {.link_id = row_,
                                  .mono_ns = mono_ns,
                                  .wall_ns = wall_ns,
                                  .kind = "counters",
@@ -71,25 +89,29 @@ void LinkRecorder::finish(std::int64_t mono_ns, std::int64_t wall_ns, std::vecto
 
 void LinkRecorder::record_mavlink_reference(const MavlinkReference::Choice& choice) { reference_.emplace(choice); }
 
-void LinkRecorder::record_reference(std::int64_t mono_ns, bool at_end) {
+// At the end only the reference's waiting rows: the chunk's messages were taken with it.
+void LinkRecorder::record_reference(const LinkDecoder& decoder, std::int64_t mono_ns, bool at_end) {
   if (!reference_) return;
   reference_rows_.clear();
-  if (const auto imu = decoder_.mavlink_imu()) reference_->prefer_sender({imu->sysid, imu->compid});
-  for (const protocol::mavlink::Message& m : decoder_.mavlink_messages()) {
-    reference_->on_message(m, mono_ns, reference_rows_);
+  if (const auto imu = decoder.mavlink_imu()) reference_->prefer_sender({imu->sysid, imu->compid});
+  if (!at_end) {
+    for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
+      reference_->on_message(m, mono_ns, reference_rows_);
+    }
+  } else {
+    reference_->finish(reference_rows_);
   }
-  if (at_end) reference_->finish(reference_rows_);
   for (const store::ReferenceRow& row : reference_rows_) store_.append_reference(session_, row);
 }
 
 // The IMU a locking link keeps to, once, when it is first heard: for people and tools reading the session (replay
 // needs no event: it locks on the same IMU from the same chunks).
-void LinkRecorder::record_lock(std::int64_t mono_ns, std::int64_t wall_ns) {
-  if (!lock_pending_ || !decoder_.mavlink_imu()) return;
+void LinkRecorder::record_lock(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns) {
+  if (!lock_pending_ || !decoder.mavlink_imu()) return;
   lock_pending_ = false;
-  const protocol::mavlink::ImuSource imu = *decoder_.mavlink_imu();
+  const protocol::mavlink::ImuSource imu = *decoder.mavlink_imu();
   store_.append_event(session_,
-                      {.link_id = link_id_,
+                      {.link_id = row_,
                        .mono_ns = mono_ns,
                        .wall_ns = wall_ns,
                        .kind = "mavlink_imu",
@@ -97,18 +119,21 @@ void LinkRecorder::record_lock(std::int64_t mono_ns, std::int64_t wall_ns) {
                        .detail = "samples from " + protocol::mavlink::describe(imu) + " only: the first IMU heard"});
 }
 
-void LinkRecorder::store_samples(std::size_t first, const std::vector<protocol::Sample>& samples) {
-  for (std::size_t i = first; i < samples.size(); ++i) store_.append_sample(session_, samples[i]);
+void LinkRecorder::store_samples(std::span<const protocol::Sample> samples) {
+  for (protocol::Sample sample : samples) {
+    sample.link_id = row(sample.source.radio);
+    store_.append_sample(session_, sample);
+  }
 }
 
 // Every loss the decoders counted since the last chunk becomes an event with its count, so a session's losses can
 // be read from the store without re-decoding it.
-void LinkRecorder::record_losses(std::int64_t mono_ns, std::int64_t wall_ns) {
-  const protocol::DecoderCounters now = total(decoder_);
+void LinkRecorder::record_losses(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns) {
+  const protocol::DecoderCounters now = total(decoder);
   const auto record = [&](const char* kind, std::uint64_t before, std::uint64_t after, const char* unit) {
     if (after == before) return;
     const auto count = static_cast<std::int64_t>(after - before);
-    store_.append_event(session_, {.link_id = link_id_,
+    store_.append_event(session_, {.link_id = row_,
                                    .mono_ns = mono_ns,
                                    .wall_ns = wall_ns,
                                    .kind = kind,
@@ -122,6 +147,39 @@ void LinkRecorder::record_losses(std::int64_t mono_ns, std::int64_t wall_ns) {
   record("device_restart", recorded_.device_restarts, now.device_restarts,
          "device restart (its sequence number and clock went back)");
   recorded_ = now;
+}
+
+SessionRecording::SessionRecording(store::Store& store, const RecordedSession& session,
+                                   const std::vector<SessionLink>& links, const SessionEngine& engine)
+    : store_(store), run_(session.run) {
+  for (std::size_t i = 0; i < links.size(); ++i) {
+    recorders_.push_back(std::make_unique<LinkRecorder>(store, session.id, session.store_links.at(i),
+                                                        links[i].recorded.name, engine.decoder(i)));
+    if (links[i].mavlink_reference) recorders_.back()->record_mavlink_reference(*links[i].mavlink_reference);
+  }
+}
+
+void SessionRecording::on_sample(std::size_t, const protocol::Sample& sample,
+                                 std::span<const store::Estimate> estimates, std::int64_t) {
+  append(sample.source, estimates);
+}
+
+void SessionRecording::on_final_estimates(const protocol::SourceKey& source,
+                                          std::span<const store::Estimate> estimates) {
+  append(source, estimates);
+}
+
+void SessionRecording::append(const protocol::SourceKey& source, std::span<const store::Estimate> estimates) {
+  if (!run_ || estimates.empty()) return;
+  const std::int64_t link = row(source);
+  for (store::Estimate estimate : estimates) {
+    estimate.link_id = link;
+    store_.append_estimate(*run_, estimate);
+  }
+}
+
+void SessionRecording::end(const SessionEngine& engine, std::int64_t mono_ns, std::int64_t wall_ns) {
+  for (std::size_t i = 0; i < recorders_.size(); ++i) recorders_[i]->end(engine.decoder(i), mono_ns, wall_ns);
 }
 
 }  // namespace imubridge::pipeline

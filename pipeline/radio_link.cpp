@@ -9,7 +9,6 @@ namespace imubridge::pipeline {
 namespace {
 
 constexpr std::size_t kAddressBytes = 8;  // XBee 64-bit source address
-constexpr protocol::LinkId kUnrecordedBit = protocol::LinkId{1} << 62;
 
 }  // namespace
 
@@ -33,16 +32,6 @@ std::optional<RadioLinkName> parse_radio_link_name(std::string_view name) {
   RadioLinkName radio{.link = std::string(name.substr(0, slash))};
   std::from_chars(address.data(), address.data() + address.size(), radio.source64, 16);
   return radio;
-}
-
-protocol::LinkId unrecorded_radio_id(std::uint32_t link_index, std::uint32_t radio_index) {
-  return kUnrecordedBit | protocol::LinkId{link_index & 0x7fffu} << 16 | protocol::LinkId{radio_index & 0xffffu};
-}
-
-bool is_unrecorded_radio_id(protocol::LinkId id) { return (id & kUnrecordedBit) != 0; }
-
-std::uint32_t unrecorded_radio_link_index(protocol::LinkId id) {
-  return static_cast<std::uint32_t>((id >> 16) & 0x7fff);
 }
 
 }  // namespace imubridge::pipeline

@@ -21,10 +21,6 @@ RecordedSession begin_recorded_session(store::Store& store, const SessionStart& 
       const RecordedLink& r = link.recorded;
       session.store_links.push_back(
           store.add_link(session.id, r.name, protocol::wire_format_name(r.format), link.device));
-      session.recorders.push_back(std::make_unique<LinkRecorder>(store, session.id, session.store_links.back(), r.name,
-                                                                 r.format, r.calibration, r.mavlink_imu));
-      if (r.mavlink_imu_lock) session.recorders.back()->lock_mavlink_imu(*r.mavlink_imu_lock);
-      if (link.mavlink_reference) session.recorders.back()->record_mavlink_reference(*link.mavlink_reference);
     }
     if (start.estimated_with) {
       session.run = store.begin_run(session.id, {.kind = start.kind,
@@ -32,7 +28,6 @@ RecordedSession begin_recorded_session(store::Store& store, const SessionStart& 
                                                  .created_wall_ns = start.started_wall_ns});
     }
   } catch (const store::StoreError&) {
-    session.recorders.clear();
     try {
       store.end_session(session.id, start.started_wall_ns);
     } catch (const store::StoreError&) {

@@ -103,4 +103,10 @@ std::vector<RecordedLink> recorded_links(const std::string& session_config_json)
   return links;
 }
 
+LinkDecoder make_decoder(const RecordedLink& link) {
+  LinkDecoder decoder(link.format, link.calibration, link.mavlink_imu);
+  if (link.mavlink_imu_lock) decoder.lock_mavlink_imu(*link.mavlink_imu_lock);
+  return decoder;
+}
+
 }  // namespace imubridge::pipeline

@@ -29,6 +29,9 @@ struct RecordedLink {
   std::optional<MavlinkImuLock> mavlink_imu_lock{};
 };
 
+// The decoder that reads `link`'s bytes as it was recorded: its format, calibration, and MAVLink IMU or lock.
+LinkDecoder make_decoder(const RecordedLink& link);
+
 nlohmann::json calibration_to_json(const protocol::Calibration& c);
 // Throws std::invalid_argument naming the bad field.
 protocol::Calibration calibration_from_json(const nlohmann::json& j);

@@ -84,12 +84,12 @@ imu::ImuRaw Calibration::to_counts(const std::array<double, 3>& accel_si, const 
           to_count((temperature_c - temperature_offset_c) / temperature_scale)};
 }
 
-std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, LinkId link_id,
+std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, const SourceKey& source,
                                 std::int64_t recv_mono_ns) {
   const auto* raw = std::get_if<imu::ImuRaw>(&frame.payload);
   if (!raw) return std::nullopt;
   Sample s = calibration.to_sample(*raw);
-  s.link_id = link_id;
+  s.source = source;
   s.seq = frame.sequence;
   s.device_time_us = static_cast<std::int64_t>(frame.device_time_us);
   s.clock_epoch = frame.clock_epoch;

@@ -40,7 +40,7 @@ struct Calibration {
 
 // A decoded IMU sample frame as a Sample (sequence unwrapped, device time from the frame); nothing for frames
 // that carry no measurement (velocity estimates).
-std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, LinkId link_id,
+std::optional<Sample> to_sample(const imu::Frame& frame, const Calibration& calibration, const SourceKey& source,
                                 std::int64_t recv_mono_ns);
 
 }  // namespace imubridge::protocol

@@ -125,7 +125,7 @@ void to_json(nlohmann::json& j, const Message& m);
 
 // HIGHRES_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, and RAW_IMU given the IMU's calibration, as a Sample in SI
 // units; nothing for other messages (ATTITUDE included) or for RAW_IMU without a calibration. seq is the 8-bit wire
-// number; link_id and recv_mono_ns are the caller's to fill.
+// number; source and recv_mono_ns are the caller's to fill.
 std::optional<Sample> to_sample(const Message& m, const Calibration* raw_calibration);
 
 // Which IMU a message to_sample converts measures: its sender (system and component), its message (SCALED_IMU,

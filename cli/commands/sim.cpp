@@ -21,8 +21,9 @@
 #include "cli/pty.hpp"
 #include "estimator/imu_axes.hpp"
 #include "fileio/whole_file.hpp"
-#include "pipeline/record_and_decode.hpp"
+#include "pipeline/link_recorder.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_config.hpp"
 #include "pipeline/session_engine.hpp"
 #include "protocol/calibration.hpp"
 #include "importers/tlog.hpp"
@@ -131,17 +132,20 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   store::Store store(o.db);
   const std::int64_t start_wall = wall_now_ns();
   const AxesWriter in_axes{estimator::parse_imu_axes(o.imu_axes), config.imu.calibration};
-  pipeline::RecordedSession recorded =
+  const std::vector<pipeline::SessionLink> links{{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
+                                                  .device = "simulated IMU, scenario " + o.scenario}};
+  const pipeline::RecordedSession recorded =
       pipeline::begin_recorded_session(store,
                                        {.kind = "sim",
                                         .source = "imubridge sim " + describe(o, config).dump(),
                                         .config = describe(o, config),
                                         .started_wall_ns = start_wall},
-                                       {{.recorded = {"sim", format, config.imu.calibration, o.imu_axes},
-                                         .device = "simulated IMU, scenario " + o.scenario}});
+                                       links);
   const std::int64_t session = recorded.id;
-  pipeline::RecordAndDecode recording(std::move(recorded.recorders[0]));
   pipeline::SessionEngine engine(nullptr);
+  engine.add_link(pipeline::make_decoder(links[0].recorded));
+  pipeline::SessionRecording recording(store, recorded, links, engine);
+  engine.add_sink(recording);
   sim::FrameEncoder encoder(format);
   std::vector<std::uint8_t> bytes;
   std::int64_t last_ns = 0;
@@ -150,7 +154,7 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
     last_ns = to_ns(s.time_s);
     bytes.clear();
     encoder.encode(in_axes(s), bytes);
-    if (!bytes.empty()) engine.on_chunk(0, recording, bytes, last_ns, start_wall + last_ns);
+    if (!bytes.empty()) engine.on_chunk(0, bytes, last_ns, start_wall + last_ns);
     if (const std::optional<sim::ReferencePose> pose = receiver.next(s.truth)) {
       const auto& q = pose->attitude;
       const auto& p = pose->position_ned;
@@ -164,8 +168,8 @@ int record_to_db(const SimOptions& o, const sim::SimConfig& config) {
   });
   bytes.clear();
   encoder.flush(bytes);
-  if (!bytes.empty()) engine.on_chunk(0, recording, bytes, last_ns, start_wall + last_ns);
-  engine.finish_link(0, recording, last_ns, start_wall + last_ns);
+  if (!bytes.empty()) engine.on_chunk(0, bytes, last_ns, start_wall + last_ns);
+  engine.finish_link(0, last_ns, start_wall + last_ns);
   engine.finish();
   pipeline::end_recorded_session(store, session, wall_now_ns());
   std::fprintf(stderr, "recorded %s flight (%.1f s, seed %llu) into %s as session %lld\n", o.scenario.c_str(),

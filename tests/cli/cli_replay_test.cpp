@@ -85,8 +85,12 @@ std::map<std::int64_t, std::vector<store::Estimate>> estimate_stored_samples(con
                                                                              const estimator::ModelParams& params) {
   pipeline::EstimationStage stage(params);
   std::map<std::int64_t, std::vector<store::Estimate>> out;
-  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) {
-    if (const auto e = stage.update(s)) out[e->link_id].push_back(*e);
+  store.for_each_sample(session, std::nullopt, [&](protocol::Sample s) {
+    s.source.link = static_cast<std::uint32_t>(s.link_id);  // a stored sample's stream: its store link
+    if (auto e = stage.update(s)) {
+      e->link_id = s.link_id;  // the stage leaves storing to whoever stores: it is the sample's link
+      out[s.link_id].push_back(*e);
+    }
   });
   return out;
 }

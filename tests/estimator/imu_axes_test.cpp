@@ -382,7 +382,7 @@ TEST(ImuAxesStage, AutoLinkWaitsThenGivesTheFrdEstimatesBitForBit) {
     std::vector<protocol::Sample> out;
     for (std::size_t k = 0; k < body.size(); ++k) {
       protocol::Sample s;
-      s.link_id = 3;
+      s.source.link = 3;
       s.seq = k;
       s.device_time_us = static_cast<std::int64_t>(k) * 5000;
       const Vector3d a = imu_to_body.transpose() * body.accel[k], w = imu_to_body.transpose() * body.gyro[k];
@@ -399,7 +399,7 @@ TEST(ImuAxesStage, AutoLinkWaitsThenGivesTheFrdEstimatesBitForBit) {
   }
   std::vector<std::string> resolved;
   pipeline::StageAxes axes;
-  axes.on_resolved = [&](protocol::LinkId, const AxesResolution& r) { resolved.push_back(r.description); };
+  axes.on_resolved = [&](const protocol::SourceKey&, const AxesResolution& r) { resolved.push_back(r.description); };
   pipeline::EstimationStage flu(params, axes);
   std::vector<store::Estimate> got;
   for (const auto& s : samples(parse_imu_axes("flu").imu_to_body)) flu.update(s, got);

@@ -9,6 +9,9 @@
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/link_recorder.hpp"
 #include "pipeline/mavlink_reference.hpp"
+#include "pipeline/recorded_session.hpp"
+#include "pipeline/session_config.hpp"
+#include "pipeline/session_engine.hpp"
 #include "protocol/mavlink_messages.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
@@ -33,7 +36,7 @@ Flight fly(WireFormat format, double seconds = 2.0) {
 }
 
 std::vector<protocol::Sample> decode(WireFormat format, const Flight& f, std::size_t max_piece) {
-  LinkDecoder decoder(format, 3, protocol::Calibration::reference_board());
+  LinkDecoder decoder(format, protocol::Calibration::reference_board());
   std::vector<protocol::Sample> out;
   std::mt19937 rng(11);
   std::int64_t t = 0;
@@ -60,7 +63,10 @@ TEST_P(EveryFormat, EverySimulatedSampleArrivesOnceInOrder) {
     for (std::size_t i = 0; i < samples.size(); ++i) {
       const auto& got = samples[i];
       const auto& want = f.samples[i];
-      EXPECT_EQ(got.link_id, 3u);
+      // Keyed by the radio on an XBee link; the link's index is the engine's to set.
+      const bool xbee = GetParam() == WireFormat::xbee || GetParam() == WireFormat::xbee_escaped;
+      EXPECT_EQ(got.source.radio.has_value(), xbee);
+      EXPECT_EQ(got.source.link, 0u);
       EXPECT_EQ(got.device_time_us, std::llround(want.time_s * 1e6));
       if (i > 0 && GetParam() == WireFormat::mavlink) {
         // MAVLink numbers every message of a component, so the ATTITUDE messages between IMU samples use some.
@@ -101,7 +107,7 @@ TEST(LinkDecoder, AMavlinkLinkCanKeepOneImu) {
     }
   }
   const auto decode = [&](std::optional<mav::ImuSource> source) {
-    LinkDecoder decoder(WireFormat::mavlink, 3, protocol::Calibration::reference_board(), {}, source);
+    LinkDecoder decoder(WireFormat::mavlink, protocol::Calibration::reference_board(), source);
     std::vector<protocol::Sample> out;
     decoder.feed(bytes, 1, out);
     decoder.finish(2, out);
@@ -131,7 +137,7 @@ TEST(LinkDecoder, AMavlinkLinkLocksOnTheFirstImuItHears) {
     mav::encode(mav::make_message(mav::HighresImu{.time_usec = 1000 * i, .zacc = -9.8f}, {.seq = seq++}), bytes);
   }
   const auto decode = [&](MavlinkImuLock lock) {
-    LinkDecoder decoder(WireFormat::mavlink, 3, protocol::Calibration::reference_board());
+    LinkDecoder decoder(WireFormat::mavlink, protocol::Calibration::reference_board());
     decoder.lock_mavlink_imu(lock);
     EXPECT_FALSE(decoder.mavlink_imu());
     std::vector<protocol::Sample> out;
@@ -225,13 +231,17 @@ TEST_F(LinkRecorderTest, StoresChunksSamplesAndEveryLossAsEvents) {
   std::int64_t session = 0;
   {
     store::Store store(path_);
-    session = store.begin_session({.kind = "test", .source = "unit", .config = "{}", .started_wall_ns = 1});
-    const std::int64_t link = store.add_link(session, "sim", "imubridge", "test");
-    LinkRecorder recorder(store, session, link, "sim", WireFormat::imubridge, protocol::Calibration::reference_board());
-    std::vector<protocol::Sample> samples;
-    for (std::size_t i = 0; i < sent.size(); ++i) recorder.on_chunk(sent[i], 1000 * i, 5000 + i, samples);
-    recorder.finish(1000 * sent.size(), 5000 + sent.size(), samples);
-    EXPECT_EQ(samples.size(), samples_sent);
+    const std::vector<SessionLink> links{
+        {.recorded = {.name = "sim", .format = WireFormat::imubridge}, .device = "test"}};
+    const RecordedSession recorded =
+        begin_recorded_session(store, {.kind = "test", .source = "unit", .started_wall_ns = 1}, links);
+    session = recorded.id;
+    SessionEngine engine(nullptr);
+    engine.add_link(make_decoder(links[0].recorded));
+    SessionRecording recording(store, recorded, links, engine);
+    engine.add_sink(recording);
+    for (std::size_t i = 0; i < sent.size(); ++i) engine.on_chunk(0, sent[i], 1000 * i, 5000 + i);
+    engine.finish_link(0, 1000 * sent.size(), 5000 + sent.size());
   }
   store::Store reader(path_, {.read_only = true});
   std::size_t chunk_index = 0;

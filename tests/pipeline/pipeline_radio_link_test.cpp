@@ -1,10 +1,8 @@
-// The XBee radio -> link rule the recorder, replay and the daemon share: store link names and ids while not
-// recording.
+// The XBee radio -> store link rule the recording and replay share: the store link's name.
 #include <gtest/gtest.h>
 
 #include <cstdint>
 #include <optional>
-#include <set>
 
 #include "pipeline/radio_link.hpp"
 
@@ -32,23 +30,6 @@ TEST(RadioLink, OtherNamesAreNotRadios) {
   EXPECT_EQ(parse_radio_link_name("radio/0013A20040A1B2C30"), std::nullopt);  // 17
   EXPECT_EQ(parse_radio_link_name("radio/0013a20040a1b2c3"), std::nullopt);   // hex() writes upper case
   EXPECT_EQ(parse_radio_link_name("radio/0013A20040A1B2G3"), std::nullopt);
-}
-
-TEST(RadioLink, UnrecordedIdsAreAboveStoreIdsAndNameTheirLink) {
-  std::set<protocol::LinkId> ids;
-  for (std::uint32_t link = 0; link < 3; ++link) {
-    for (std::uint32_t radio = 0; radio < 3; ++radio) {
-      const protocol::LinkId id = unrecorded_radio_id(link, radio);
-      EXPECT_TRUE(is_unrecorded_radio_id(id));
-      EXPECT_GE(id, protocol::LinkId{1} << 62);
-      EXPECT_EQ(unrecorded_radio_link_index(id), link);
-      ids.insert(id);
-    }
-  }
-  EXPECT_EQ(ids.size(), 9u) << "every radio of every link has an id of its own";
-  EXPECT_EQ(unrecorded_radio_id(2, 5), (protocol::LinkId{1} << 62) + 0x20005);
-  EXPECT_FALSE(is_unrecorded_radio_id(1));  // store link ids (SQLite row ids) stay far below
-  EXPECT_FALSE(is_unrecorded_radio_id(std::int64_t{1} << 40));
 }
 
 }  // namespace

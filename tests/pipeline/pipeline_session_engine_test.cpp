@@ -1,6 +1,7 @@
 // The engine every session runs through: decoding, estimation and the fan-out to sinks, in order.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -9,8 +10,9 @@
 #include <utility>
 #include <vector>
 
-#include "pipeline/record_and_decode.hpp"
+#include "pipeline/link_recorder.hpp"
 #include "pipeline/recorded_session.hpp"
+#include "pipeline/session_config.hpp"
 #include "pipeline/session_engine.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
@@ -46,9 +48,9 @@ struct Recorder final : SessionSink {
   std::size_t bytes = 0;
 
   Recorder(std::string n, std::vector<std::string>* l) : name(std::move(n)), log(l) {}
-  void on_bytes(std::size_t link, std::span<const std::uint8_t> b, std::int64_t) override {
-    bytes += b.size();
-    log->push_back(name + " bytes " + std::to_string(link));
+  void on_chunk(std::size_t link, const DecodedChunk& chunk) override {
+    bytes += chunk.bytes.size();
+    log->push_back(name + (chunk.end ? " end " : " bytes ") + std::to_string(link));
   }
   void on_sample(std::size_t link, const protocol::Sample& s, std::span<const store::Estimate> e,
                  std::int64_t) override {
@@ -56,31 +58,31 @@ struct Recorder final : SessionSink {
     estimates.insert(estimates.end(), e.begin(), e.end());
     log->push_back(name + " sample " + std::to_string(link) + " " + std::to_string(s.seq));
   }
-  void on_final_estimates(std::span<const store::Estimate> e) override {
-    final_estimates.assign(e.begin(), e.end());
-    log->push_back(name + " final");
+  void on_final_estimates(const protocol::SourceKey& source, std::span<const store::Estimate> e) override {
+    final_estimates.insert(final_estimates.end(), e.begin(), e.end());
+    log->push_back(name + " final " + std::to_string(source.link));
   }
 };
 
 TEST(SessionEngine, GivesEverySinkTheDecodedSamplesAndTheStagesEstimatesInOrder) {
   const auto chunks = flight_chunks(2.0);
-  LinkDecoder decoder(protocol::WireFormat::imubridge, 7, protocol::Calibration::reference_board());
-  DecodeOnly decoding(decoder);
   std::vector<std::string> log;
   Recorder first("a", &log), second("b", &log);
   SessionEngine engine(std::make_unique<EstimationStage>(paper_params()));
+  EXPECT_EQ(engine.add_link(LinkDecoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board())),
+            0u);
   engine.add_sink(first);
   engine.add_sink(second);
   std::int64_t t = 0;
   for (const auto& chunk : chunks) {
     t += 1'000'000;
-    engine.on_chunk(0, decoding, chunk, t, t);
+    engine.on_chunk(0, chunk, t, t);
   }
-  engine.finish_link(0, decoding, t, t);
+  engine.finish_link(0, t, t);
   engine.finish();
 
   // The same samples through a LinkDecoder and an EstimationStage by hand: what the engine must have done.
-  LinkDecoder reference_decoder(protocol::WireFormat::imubridge, 7, protocol::Calibration::reference_board());
+  LinkDecoder reference_decoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board());
   EstimationStage reference_stage(paper_params());
   std::vector<protocol::Sample> samples;
   std::vector<store::Estimate> estimates;
@@ -99,7 +101,8 @@ TEST(SessionEngine, GivesEverySinkTheDecodedSamplesAndTheStagesEstimatesInOrder)
   for (const auto& chunk : chunks) total += chunk.size();
   EXPECT_EQ(first.bytes, total);
 
-  // Per chunk: every sink gets the bytes, then each sample goes to every sink in the order they were added.
+  // Per chunk: every sink gets the chunk, then each sample goes to every sink in the order they were added; the
+  // end of the stream comes the same way. Nothing waited for its axes, so nothing is released at the end.
   ASSERT_GE(log.size(), 4u);
   EXPECT_EQ(log[0], "a bytes 0");
   EXPECT_EQ(log[1], "b bytes 0");
@@ -107,27 +110,31 @@ TEST(SessionEngine, GivesEverySinkTheDecodedSamplesAndTheStagesEstimatesInOrder)
       std::find_if(log.begin(), log.end(), [](const auto& l) { return l.starts_with("a sample"); });
   ASSERT_NE(first_sample, log.end());
   EXPECT_EQ(*std::next(first_sample), "b" + first_sample->substr(1));
-  EXPECT_EQ(log[log.size() - 2], "a final");
-  EXPECT_EQ(log.back(), "b final");
+  for (const auto& s : first.samples) EXPECT_EQ(s.source, protocol::SourceKey{.link = 0});
+  const auto end = std::find(log.begin(), log.end(), "a end 0");
+  ASSERT_NE(end, log.end());
+  EXPECT_EQ(*std::next(end), "b end 0");
+  EXPECT_TRUE(first.final_estimates.empty());
 }
 
 TEST(SessionEngine, ALinkWaitingForItsAxesReleasesItsEstimatesAtTheEnd) {
   // Auto axes on a flight too short to decide: every estimate waits until finish().
   const auto chunks = flight_chunks(0.3);
-  LinkDecoder decoder(protocol::WireFormat::imubridge, 1, protocol::Calibration::reference_board());
-  DecodeOnly decoding(decoder);
   std::vector<std::string> log;
   Recorder sink("a", &log);
   StageAxes axes;  // every link auto
   SessionEngine engine(std::make_unique<EstimationStage>(paper_params(), std::move(axes)));
+  engine.add_link(LinkDecoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board()));
+  engine.add_link(LinkDecoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board()));
   engine.add_sink(sink);
-  for (const auto& chunk : chunks) engine.on_chunk(0, decoding, chunk, 0, 0);
-  engine.finish_link(0, decoding, 0, 0);
+  for (const auto& chunk : chunks) engine.on_chunk(1, chunk, 0, 0);
+  engine.finish_link(1, 0, 0);
   ASSERT_GT(sink.samples.size(), 50u);
   EXPECT_TRUE(sink.estimates.empty());
   engine.finish();
   EXPECT_EQ(sink.final_estimates.size(),
             sink.samples.size() - 2 * static_cast<std::size_t>(engine.stage()->delay_samples()));
+  EXPECT_EQ(log.back(), "a final 1");  // released under the link that waited
 }
 
 // Writers without parameters (sim --db, the imports) run the engine without a stage: the sinks get every chunk and
@@ -135,20 +142,19 @@ TEST(SessionEngine, ALinkWaitingForItsAxesReleasesItsEstimatesAtTheEnd) {
 TEST(SessionEngine, WithoutAStageGivesTheSinksEverySampleAndNoEstimate) {
   const auto chunks = flight_chunks(2.0);
   const auto run = [&](std::unique_ptr<EstimationStage> stage) {
-    LinkDecoder decoder(protocol::WireFormat::imubridge, 7, protocol::Calibration::reference_board());
-    DecodeOnly decoding(decoder);
     std::vector<std::string> log;
     Recorder sink("a", &log);
     SessionEngine engine(std::move(stage));
+    engine.add_link(LinkDecoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board()));
     engine.add_sink(sink);
     std::int64_t t = 0;
     for (const auto& chunk : chunks) {
       t += 1'000'000;
-      engine.on_chunk(0, decoding, chunk, t, t);
+      engine.on_chunk(0, chunk, t, t);
     }
-    engine.finish_link(0, decoding, t, t);
+    engine.finish_link(0, t, t);
     engine.finish();
-    EXPECT_EQ(log.back(), "a final");
+    EXPECT_NE(std::find(log.begin(), log.end(), "a end 0"), log.end());
     return sink;
   };
   const Recorder estimated = run(std::make_unique<EstimationStage>(estimator::ModelParams{}));
@@ -167,27 +173,30 @@ TEST(SessionEngine, WithoutAStageGivesTheSinksEverySampleAndNoEstimate) {
   EXPECT_EQ(SessionEngine(nullptr).stage(), nullptr);
 }
 
-// sim --db and the imports: a recorded session through RecordAndDecode and an engine without a stage stores every
-// chunk and every sample the sinks saw, and no run.
+// sim --db and the imports: a recorded session through its SessionRecording and an engine without a stage stores
+// every chunk and every sample the sinks saw, and no run.
 TEST(SessionEngine, RecordingWithoutAStageStoresChunksAndSamplesAndNoRun) {
   const auto chunks = flight_chunks(1.0);
   test::TempDir dir;
   store::Store store(dir / "s.db");
-  RecordedSession recorded = begin_recorded_session(
-      store, {.kind = "sim", .source = "test", .config = nlohmann::json::object()},
-      {{.recorded = {"imu0", protocol::WireFormat::imubridge, protocol::Calibration::reference_board(), "frd"},
-        .device = "test"}});
-  RecordAndDecode recording(std::move(recorded.recorders[0]));
+  const std::vector<SessionLink> links{
+      {.recorded = {"imu0", protocol::WireFormat::imubridge, protocol::Calibration::reference_board(), "frd"},
+       .device = "test"}};
+  const RecordedSession recorded =
+      begin_recorded_session(store, {.kind = "sim", .source = "test", .config = nlohmann::json::object()}, links);
   std::vector<std::string> log;
   Recorder sink("a", &log);
   SessionEngine engine(nullptr);
+  engine.add_link(make_decoder(links[0].recorded));
+  SessionRecording recording(store, recorded, links, engine);
+  engine.add_sink(recording);
   engine.add_sink(sink);
   std::int64_t t = 0;
   for (const auto& chunk : chunks) {
     t += 1'000'000;
-    engine.on_chunk(0, recording, chunk, t, t);
+    engine.on_chunk(0, chunk, t, t);
   }
-  engine.finish_link(0, recording, t, t);
+  engine.finish_link(0, t, t);
   engine.finish();
   end_recorded_session(store, recorded.id, t);
 
@@ -200,25 +209,86 @@ TEST(SessionEngine, RecordingWithoutAStageStoresChunksAndSamplesAndNoRun) {
   ASSERT_GT(stored.size(), 150u);
   for (std::size_t i = 0; i < stored.size(); ++i) EXPECT_EQ(stored[i].seq, sink.samples[i].seq);
   std::uint64_t frames = 0;
-  for (const auto& [layer, counters] : recording.decoder().counters()) frames += counters.frames_out;
-  EXPECT_EQ(frames, stored.size());  // the recorder's own decoder decoded them
+  for (const auto& [layer, counters] : engine.decoder(0).counters()) frames += counters.frames_out;
+  EXPECT_EQ(frames, stored.size());  // the engine's decoder of the link decoded them
   EXPECT_TRUE(sink.estimates.empty());
   EXPECT_TRUE(store.runs(recorded.id).empty());
 }
 
+// The daemon's rotation: one engine, its decoder and stage running on, recorded into one store and then another. A
+// frame cut between the two stores is decoded and stored in the second; each store's counters are its own share; and
+// the estimates the two runs hold, one after the other, are those of a run recorded into one store.
+TEST(SessionEngine, ARecordingCanEndAndAnotherBeginWhileTheEngineRunsOn) {
+  const auto chunks = flight_chunks(1.0);
+  test::TempDir dir;
+  const std::vector<SessionLink> links{
+      {.recorded = {"imu0", protocol::WireFormat::imubridge, protocol::Calibration::reference_board(), "frd"},
+       .device = "test"}};
+  const auto record = [&](const std::vector<std::string>& files, std::size_t switch_at) {
+    SessionEngine engine(std::make_unique<EstimationStage>(paper_params()));
+    engine.add_link(make_decoder(links[0].recorded));
+    std::vector<std::int64_t> sessions;
+    std::int64_t t = 0;
+    for (std::size_t f = 0; f < files.size(); ++f) {
+      store::Store store(dir / files[f]);
+      const RecordedSession recorded =
+          begin_recorded_session(store, {.kind = "live", .estimated_with = paper_params()}, links);
+      sessions.push_back(recorded.id);
+      SessionRecording recording(store, recorded, links, engine);
+      engine.add_sink(recording);
+      const std::size_t until = f + 1 < files.size() ? switch_at : chunks.size();
+      for (std::size_t i = f == 0 ? 0 : switch_at; i < until; ++i) engine.on_chunk(0, chunks[i], t += 1'000, t);
+      if (f + 1 == files.size()) engine.finish_link(0, t, t);
+      recording.end(engine, t, t);
+      engine.remove_sink(recording);
+      end_recorded_session(store, recorded.id, t);
+    }
+    return sessions;
+  };
+  record({"one.db"}, 0);
+  record({"first.db", "second.db"}, chunks.size() / 2);
+
+  struct Held {
+    std::vector<std::uint64_t> seqs;
+    std::vector<store::Estimate> estimates;
+    std::uint64_t bytes_in = 0;
+  };
+  const auto held = [&](const std::string& file) {
+    const store::Store store(dir / file, {.read_only = true});
+    Held h;
+    store.for_each_sample(1, std::nullopt, [&](const protocol::Sample& s) { h.seqs.push_back(s.seq); });
+    store.for_each_estimate(store.runs(1).at(0).id, [&](const store::Estimate& e) { h.estimates.push_back(e); });
+    for (const store::Event& e : store.events(1)) {
+      if (e.kind == "counters")
+        h.bytes_in += nlohmann::json::parse(e.detail)["imubridge"]["bytes_in"].get<std::uint64_t>();
+    }
+    return h;
+  };
+  const Held one = held("one.db"), first = held("first.db"), second = held("second.db");
+  std::vector<std::uint64_t> seqs = first.seqs;
+  seqs.insert(seqs.end(), second.seqs.begin(), second.seqs.end());
+  EXPECT_EQ(seqs, one.seqs) << "every frame decoded once, the one cut between the stores too";
+  std::vector<store::Estimate> estimates = first.estimates;
+  estimates.insert(estimates.end(), second.estimates.begin(), second.estimates.end());
+  ASSERT_GT(one.estimates.size(), 150u);
+  EXPECT_EQ(estimates, one.estimates) << "the filter ran on: bit for bit what one store holds";
+  EXPECT_EQ(first.bytes_in + second.bytes_in, one.bytes_in);
+  EXPECT_GT(second.bytes_in, 0u);
+  EXPECT_LT(second.bytes_in, one.bytes_in);
+}
+
 TEST(SessionEngine, ARemovedSinkHearsNothingMore) {
   const auto chunks = flight_chunks(0.5);
-  LinkDecoder decoder(protocol::WireFormat::imubridge, 1, protocol::Calibration::reference_board());
-  DecodeOnly decoding(decoder);
   std::vector<std::string> log;
   Recorder kept("a", &log), removed("b", &log);
   SessionEngine engine(std::make_unique<EstimationStage>(paper_params()));
+  engine.add_link(LinkDecoder(protocol::WireFormat::imubridge, protocol::Calibration::reference_board()));
   engine.add_sink(kept);
   engine.add_sink(removed);
-  engine.on_chunk(0, decoding, chunks[0], 0, 0);
+  engine.on_chunk(0, chunks[0], 0, 0);
   const std::size_t heard = removed.bytes;
   engine.remove_sink(removed);
-  for (std::size_t i = 1; i < chunks.size(); ++i) engine.on_chunk(0, decoding, chunks[i], 0, 0);
+  for (std::size_t i = 1; i < chunks.size(); ++i) engine.on_chunk(0, chunks[i], 0, 0);
   EXPECT_EQ(removed.bytes, heard);
   EXPECT_GT(kept.bytes, heard);
 }

@@ -93,42 +93,33 @@ class Replay : public ::testing::Test {
     std::optional<std::int64_t> live_run;
   };
 
-  // Records `stream` on link "imu0" as the daemon does: LinkRecorder::on_chunk per read, then, with params, the
-  // EstimationStage per sample into a run of kind "live" whose params are the PARAMS.json it used.
+  // Records `stream` on link "imu0" as the daemon does: each read through the session engine, whose recording stores
+  // it and, with params, the EstimationStage's estimates into a run of kind "live" whose params are those it used.
   Recorded record(store::Store& store, WireFormat format, const Stream& stream,
                   std::optional<estimator::ModelParams> params) {
-    const auto calibration = protocol::Calibration::reference_board();
-    nlohmann::json config = {{"note", "recorded by replay_test"}};
-    pipeline::add_recorded_links(config, {{"imu0", format, calibration}});
-    Recorded r;
-    r.session = store.begin_session(
-        {.kind = "live", .source = "test", .config = config.dump(), .started_wall_ns = kWallAtStart});
-    const std::int64_t link = store.add_link(r.session, "imu0", protocol::wire_format_name(format), "test port");
-    pipeline::LinkRecorder recorder(store, r.session, link, "imu0", format, calibration);
-    std::optional<pipeline::EstimationStage> stage;
-    if (params) {
-      stage.emplace(*params);
-      r.live_run = store.begin_run(r.session, {.kind = "live", .params_json = nlohmann::json(*params).dump()});
-    }
-    std::vector<protocol::Sample> samples;
-    const auto estimate = [&] {
-      for (const auto& s : samples) {
-        if (!stage) continue;
-        if (const auto e = stage->update(s)) store.append_estimate(*r.live_run, *e);
-      }
-      samples.clear();
-    };
+    const std::vector<pipeline::SessionLink> links{
+        {.recorded = {"imu0", format, protocol::Calibration::reference_board()}, .device = "test port"}};
+    const pipeline::RecordedSession begun =
+        pipeline::begin_recorded_session(store,
+                                         {.kind = "live",
+                                          .source = "test",
+                                          .config = {{"note", "recorded by replay_test"}},
+                                          .started_wall_ns = kWallAtStart,
+                                          .estimated_with = params},
+                                         links);
+    pipeline::SessionEngine engine(params ? std::make_unique<pipeline::EstimationStage>(*params) : nullptr);
+    engine.add_link(pipeline::make_decoder(links[0].recorded));
+    pipeline::SessionRecording recording(store, begun, links, engine);
+    engine.add_sink(recording);
     std::int64_t mono = kMonoAtStart;
     for (const auto& [t, bytes] : stream) {
       mono = std::max<std::int64_t>(mono + 1, kMonoAtStart + std::llround(t * 1e9));  // every read a little later
-      recorder.on_chunk(bytes, mono, kWallAtStart + (mono - kMonoAtStart), samples);
-      estimate();
+      engine.on_chunk(0, bytes, mono, kWallAtStart + (mono - kMonoAtStart));
     }
-    recorder.finish(mono, kWallAtStart + (mono - kMonoAtStart), samples);
-    estimate();
-    store.end_session(r.session, kWallAtStart + (mono - kMonoAtStart));
-    store.commit();
-    return r;
+    engine.finish_link(0, mono, kWallAtStart + (mono - kMonoAtStart));
+    engine.finish();
+    pipeline::end_recorded_session(store, begun.id, kWallAtStart + (mono - kMonoAtStart));
+    return {.session = begun.id, .live_run = begun.run};
   }
 };
 
