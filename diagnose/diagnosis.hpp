@@ -129,6 +129,15 @@ struct Unexplained {
   double value = 0.0;  // power ratio, correlation coefficient, trend (m/s^2 per s), or the velocity's ramp (m/s^2)
 };
 
+// From the IMU alone: the line through the final model's filter velocity across both windows, per axis (search.cpp,
+// velocity_ramps). Named in `unexplained` when significant and ramping past a cruising speed.
+struct VelocityRamp {
+  std::string axis;  // "x" or "y"
+  double ramp_m_s = 0.0, span_s = 0.0;      // the line's change over the span, and the span
+  double per_s = 0.0, std_error = 0.0;      // its slope, m/s^2, and the slope's standard error (Bartlett-widened)
+  bool named = false;
+};
+
 // Per axis, the validation window's signals for the plots.
 struct AxisSeries {
   std::string axis;                                       // "x" or "y"
@@ -153,6 +162,7 @@ struct Diagnosis {
   std::vector<ResidualAnalysis> final_residual;
   bool residual_white = false;  // every axis's final validation residual passes Ljung-Box
   std::vector<Unexplained> unexplained;
+  std::vector<VelocityRamp> velocity_ramps;  // from the IMU alone, when the filter runs; empty otherwise
   std::vector<AxisSeries> series;
   // Zero velocity's error (m/s): the floor any velocity estimate must beat. With a reference only.
   std::optional<estimator::VelocityScores> zero_velocity;

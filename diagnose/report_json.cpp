@@ -215,6 +215,15 @@ nlohmann::json report_json(const Diagnosis& d) {
   for (const auto& step : d.steps) steps.push_back(step_json(d, step));
   json unexplained = json::array();
   for (const auto& u : d.unexplained) unexplained.push_back(unexplained_json(u));
+  json ramps = json::array();
+  for (const VelocityRamp& r : d.velocity_ramps) {
+    ramps.push_back({{"axis", r.axis},
+                     {"ramp_m_s", number(r.ramp_m_s)},
+                     {"span_s", number(r.span_s)},
+                     {"per_s", number(r.per_s)},
+                     {"std_error", number(r.std_error)},
+                     {"named", r.named}});
+  }
   json series = json::array();
   for (const auto& s : d.series) {
     series.push_back({{"axis", s.axis},
@@ -239,6 +248,7 @@ nlohmann::json report_json(const Diagnosis& d) {
           {"final", fit_json(d, d.final, d.final_residual)},
           {"residual_white", d.residual_white},
           {"unexplained", std::move(unexplained)},
+          {"velocity_ramps", std::move(ramps)},
           {"series", std::move(series)}};
 }
 

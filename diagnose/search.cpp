@@ -837,23 +837,29 @@ bool take_step(const Search& search, int step_index, State& current, Diagnosis& 
 // both windows that changes it by more than that is named as what the model lacks. A drag fitted too weak to hold
 // the velocity lets it run away the same way. A flight that speeds up along a leg ramps too, by less: on real
 // flights (docs/effects.md) such ramps stay within it.
-std::vector<Unexplained> velocity_ramps(const Search& search, const State& current) {
-  if (search.setup.velocity != VelocitySource::filter) return {};
+void name_velocity_ramps(const Search& search, const State& current, Diagnosis& out) {
+  if (search.setup.velocity != VelocitySource::filter) return;
   const Model model(search.signals, search.setup, current.effects);
-  if (!model.filter_runs()) return {};  // no drag: the filter reads no velocity
+  if (!model.filter_runs()) return;  // no drag: the filter reads no velocity
   const std::vector<Eigen::Vector3d> velocity = model.inputs(current.fit.values).velocity;
   const std::size_t first = std::min(search.train.first, search.validation.first);
   const std::size_t end = std::min(velocity.size(), std::max(search.train.first + search.train.count,
                                                              search.validation.first + search.validation.count));
   const std::span<const double> t(search.signals.t.data() + first, end - first);
   const double span_s = t.back() - t.front();
-  std::vector<Unexplained> out;
   for (std::size_t i = 0; i < search.setup.axes.size(); ++i) {
     std::vector<double> v(end - first);
     for (std::size_t k = first; k < end; ++k) v[k - first] = velocity[k][search.setup.axes[i]];
     const Trend trend = fit_trend(t, v, std::min(search.span_lag, v.size() / 4));
     const double change = trend.slope * span_s;
-    if (!trend.significant || !(std::abs(change) > estimator::kBriskSpeed)) continue;
+    const bool named = trend.significant && std::abs(change) > estimator::kBriskSpeed;
+    out.velocity_ramps.push_back({.axis = axis_name(search.setup.axes[i]),
+                                  .ramp_m_s = change,
+                                  .span_s = span_s,
+                                  .per_s = trend.slope,
+                                  .std_error = trend.std_error,
+                                  .named = named});
+    if (!named) continue;
     Unexplained u;
     u.kind = "velocity ramp";
     u.axis = axis_name(search.setup.axes[i]);
@@ -865,9 +871,8 @@ std::vector<Unexplained> velocity_ramps(const Search& search, const State& curre
                   "(an IMU warming up), reads so; a velocity reference would tell",
                   change, span_s, trend.slope, std::abs(trend.slope) / trend.std_error, estimator::kBriskSpeed);
     u.where = where;
-    out.push_back(std::move(u));
+    out.unexplained.push_back(std::move(u));
   }
-  return out;
 }
 
 // The final model, and what structure its validation residual leaves unexplained.
@@ -881,7 +886,7 @@ void describe_final(const Search& search, const State& current, Diagnosis& out) 
   for (std::size_t i = 0; i < out.final_residual.size(); ++i) {
     for (Unexplained& u : unexplained_structure(out.final_residual[i], out.axes[i])) out.unexplained.push_back(u);
   }
-  for (Unexplained& u : velocity_ramps(search, current)) out.unexplained.push_back(std::move(u));
+  name_velocity_ramps(search, current, out);
 }
 
 // The plots' series: the final model's frame, with each model's prediction as measured - residual.

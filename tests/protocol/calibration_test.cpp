@@ -128,16 +128,16 @@ TEST(Calibration, ValidRejectsUnusableConfigurations) {
 
 TEST(Calibration, FrameToSample) {
   const imu::Frame frame{7, 65543, 123456, imu::ImuRaw{{2048, 2048, 2048}, {}, {}, -13200}};
-  const auto s = to_sample(frame, Calibration::reference_board(), 3, 987654321);
+  const auto s = to_sample(frame, Calibration::reference_board(), SourceKey{.link = 3}, 987654321);
   ASSERT_TRUE(s.has_value());
-  EXPECT_EQ(s->link_id, 3u);
+  EXPECT_EQ(s->source, (SourceKey{.link = 3}));
   EXPECT_EQ(s->seq, 65543u);  // the unwrapped sequence, not the wire's 16 bits
   EXPECT_EQ(s->device_time_us, 123456);
   EXPECT_EQ(s->recv_mono_ns, 987654321);
   EXPECT_NEAR(s->temperature_c, 35.0, 1e-12);
 
   const imu::Frame velocity{8, 8, 0, imu::VelocityEstimate{1, 2, 3, 4}};
-  EXPECT_FALSE(to_sample(velocity, Calibration::reference_board(), 3, 0).has_value());
+  EXPECT_FALSE(to_sample(velocity, Calibration::reference_board(), SourceKey{.link = 3}, 0).has_value());
 }
 
 }  // namespace
