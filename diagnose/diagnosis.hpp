@@ -130,12 +130,13 @@ struct Unexplained {
 };
 
 // From the IMU alone: the line through the final model's filter velocity across both windows, per axis (search.cpp,
-// velocity_ramps). Named in `unexplained` when significant and ramping past a cruising speed.
+// name_velocity_ramps). Named in `unexplained` when significant and ramping past a cruising speed.
 struct VelocityRamp {
-  std::string axis;  // "x" or "y"
-  double ramp_m_s = 0.0, span_s = 0.0;      // the line's change over the span, and the span
-  double per_s = 0.0, std_error = 0.0;      // its slope, m/s^2, and the slope's standard error (Bartlett-widened)
+  std::string axis;                     // "x" or "y"
+  double span_s = 0.0;                  // both windows' span
+  double per_s = 0.0, std_error = 0.0;  // its slope, m/s^2, and the slope's standard error (Bartlett-widened)
   bool named = false;
+  double ramp_m_s() const { return per_s * span_s; }  // the line's change over the span
 };
 
 // Per axis, the validation window's signals for the plots.

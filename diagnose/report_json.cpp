@@ -218,7 +218,7 @@ nlohmann::json report_json(const Diagnosis& d) {
   json ramps = json::array();
   for (const VelocityRamp& r : d.velocity_ramps) {
     ramps.push_back({{"axis", r.axis},
-                     {"ramp_m_s", number(r.ramp_m_s)},
+                     {"ramp_m_s", number(r.ramp_m_s())},
                      {"span_s", number(r.span_s)},
                      {"per_s", number(r.per_s)},
                      {"std_error", number(r.std_error)},

@@ -851,25 +851,24 @@ void name_velocity_ramps(const Search& search, const State& current, Diagnosis& 
     std::vector<double> v(end - first);
     for (std::size_t k = first; k < end; ++k) v[k - first] = velocity[k][search.setup.axes[i]];
     const Trend trend = fit_trend(t, v, std::min(search.span_lag, v.size() / 4));
-    const double change = trend.slope * span_s;
-    const bool named = trend.significant && std::abs(change) > estimator::kBriskSpeed;
-    out.velocity_ramps.push_back({.axis = axis_name(search.setup.axes[i]),
-                                  .ramp_m_s = change,
-                                  .span_s = span_s,
-                                  .per_s = trend.slope,
-                                  .std_error = trend.std_error,
-                                  .named = named});
-    if (!named) continue;
+    const VelocityRamp& ramp = out.velocity_ramps.emplace_back(VelocityRamp{
+        .axis = out.axes[i],
+        .span_s = span_s,
+        .per_s = trend.slope,
+        .std_error = trend.std_error,
+        .named = trend.significant && std::abs(trend.slope * span_s) > estimator::kBriskSpeed});
+    if (!ramp.named) continue;
     Unexplained u;
     u.kind = "velocity ramp";
-    u.axis = axis_name(search.setup.axes[i]);
+    u.axis = ramp.axis;
     u.value = trend.slope;
     char where[320];
     std::snprintf(where, sizeof where,
                   "the filter's velocity ramps by %+.3g m/s over %.0f s (%+.3g m/s^2, %.1f standard errors), more than "
                   "a multirotor cruises at (%g m/s): a drag too weak to hold it, or an accelerometer bias that drifts "
                   "(an IMU warming up), reads so; a velocity reference would tell",
-                  change, span_s, trend.slope, std::abs(trend.slope) / trend.std_error, estimator::kBriskSpeed);
+                  ramp.ramp_m_s(), span_s, trend.slope, std::abs(trend.slope) / trend.std_error,
+                  estimator::kBriskSpeed);
     u.where = where;
     out.unexplained.push_back(std::move(u));
   }
