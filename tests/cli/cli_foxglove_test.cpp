@@ -93,6 +93,149 @@ class NodeClient {
   std::map<std::string, std::vector<json>> messages_;
 };
 
+// The one advertisement a client gets: the channels of `links`, three each, JSON with a JSON schema, ids unique.
+void expect_advertised(NodeClient& client, const std::vector<std::string>& links) {
+  const auto info = client.lines("serverInfo");
+  ASSERT_EQ(info.size(), 1u) << client.errors();
+  EXPECT_EQ(info[0].at("info").at("name"), "imubridge " IMUBRIDGE_VERSION);
+  const auto advertised = client.lines("advertise");
+  ASSERT_EQ(advertised.size(), 1u);
+  std::vector<std::string> topics, want;
+  std::set<std::int64_t> ids;
+  for (const json& channel : advertised[0].at("channels")) {
+    topics.push_back(channel.at("topic"));
+    ids.insert(channel.at("id").get<std::int64_t>());
+    EXPECT_EQ(channel.at("encoding"), "json");
+    EXPECT_EQ(channel.at("schemaEncoding"), "jsonschema");
+    EXPECT_TRUE(json::parse(channel.at("schema").get<std::string>()).at("properties").is_object());
+  }
+  for (const std::string& link : links) {
+    for (const char* channel : {"/sample", "/estimate", "/event"}) want.push_back(link + channel);
+  }
+  EXPECT_EQ(topics, want);
+  EXPECT_EQ(ids.size(), topics.size());
+}
+
+// A link's sample messages: every stored sample, in order, as stored, stamped with its chunk's arrival.
+void expect_samples_as_stored(const std::vector<json>& samples, const std::vector<protocol::Sample>& stored,
+                              const std::string& link) {
+  ASSERT_EQ(samples.size(), stored.size());
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const json& m = samples[i];
+    const protocol::Sample& s = stored[i];
+    ASSERT_EQ(m.at("seq").get<std::uint64_t>(), s.seq);
+    EXPECT_EQ(m.at("link"), link);
+    EXPECT_EQ(m.at("timestamp").get<double>(), static_cast<double>(s.device_time_us) / 1e6);
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      const char* name = std::array{"x", "y", "z"}[axis];
+      EXPECT_TRUE(same(m.at("accel").at(name), s.accel[axis])) << m;
+      EXPECT_TRUE(same(m.at("gyro").at(name), s.gyro[axis])) << m;
+      if (s.has_mag) {
+        EXPECT_TRUE(same(m.at("mag").at(name), s.mag[axis])) << m;
+      }
+    }
+    EXPECT_EQ(m.contains("mag"), s.has_mag);
+    EXPECT_EQ(m.contains("temperature"), s.has_temperature);
+    if (s.has_temperature) {
+      EXPECT_TRUE(same(m.at("temperature"), s.temperature_c)) << m;
+    }
+    EXPECT_EQ(m.at("receiveTime").get<std::int64_t>(), m.at("recv_wall_ns").get<std::int64_t>());
+  }
+}
+
+// A link's estimate messages: every one the live run stored for the link, in order.
+void expect_estimates_as_stored(const std::vector<json>& messages, const std::vector<store::Estimate>& estimates) {
+  ASSERT_EQ(messages.size(), estimates.size());
+  for (std::size_t i = 0; i < messages.size(); ++i) {
+    const json& e = messages[i].at("estimate");
+    ASSERT_EQ(e.at("seq").get<std::uint64_t>(), estimates[i].seq);
+    EXPECT_TRUE(same(e.at("fx"), estimates[i].fx)) << e;
+    EXPECT_TRUE(same(e.at("fy"), estimates[i].fy)) << e;
+    EXPECT_TRUE(same(e.at("vx"), estimates[i].vx)) << e;
+    EXPECT_TRUE(same(e.at("vy"), estimates[i].vy)) << e;
+    EXPECT_TRUE(same(e.at("sx"), std::sqrt(estimates[i].var_vx))) << e;
+    EXPECT_TRUE(same(e.at("sy"), std::sqrt(estimates[i].var_vy))) << e;
+    EXPECT_EQ(messages[i].at("receiveTime").get<std::int64_t>(), messages[i].at("recv_wall_ns").get<std::int64_t>());
+  }
+}
+
+// A link's event messages: the sequence gaps the recorder stored for the link, each as counted there.
+void expect_gap_events_as_stored(const std::vector<json>& events, const std::vector<store::Event>& gaps,
+                                 const std::string& link) {
+  ASSERT_EQ(events.size(), gaps.size());
+  for (std::size_t i = 0; i < events.size(); ++i) {
+    EXPECT_EQ(events[i].at("kind"), "sequence_gap");
+    EXPECT_EQ(events[i].at("link"), link);
+    EXPECT_EQ(events[i].at("count").get<std::int64_t>(), gaps[i].count);
+  }
+}
+
+// A client that subscribes to the first link's three channels (ids 1-3) and then reads nothing until
+// start_reading(): Boost.Beast, with a 4 KiB receive buffer. Once reading, it keeps the seq of every sample and
+// estimate it gets, in arrival order.
+class StalledClient {
+ public:
+  explicit StalledClient(std::uint16_t port) {
+    stream_.next_layer().open(boost::asio::ip::tcp::v4());
+    stream_.next_layer().set_option(boost::asio::socket_base::receive_buffer_size(4096));
+    stream_.next_layer().connect({boost::asio::ip::make_address("127.0.0.1"), port});
+    stream_.set_option(
+        boost::beast::websocket::stream_base::decorator([](boost::beast::websocket::request_type& request) {
+          request.set(boost::beast::http::field::sec_websocket_protocol, "foxglove.websocket.v1");
+        }));
+    stream_.handshake("127.0.0.1", "/");
+    stream_.text(true);
+    stream_.write(boost::asio::buffer(std::string(
+        R"({"op":"subscribe","subscriptions":[{"id":7,"channelId":1},{"id":8,"channelId":2},{"id":9,"channelId":3}]})")));
+  }
+  ~StalledClient() { stop(); }
+  StalledClient(const StalledClient&) = delete;
+  StalledClient& operator=(const StalledClient&) = delete;
+
+  void start_reading() {
+    reader_ = std::thread([this] {
+      boost::beast::flat_buffer buffer;
+      boost::system::error_code ec;
+      while (stream_.read(buffer, ec), !ec) {
+        const std::string frame = boost::beast::buffers_to_string(buffer.data());
+        buffer.consume(buffer.size());
+        if (stream_.got_binary()) take(frame);
+      }
+    });
+  }
+  // Closes the socket, should the server not have, and waits for the reader.
+  void stop() {
+    ::shutdown(stream_.next_layer().native_handle(), SHUT_RDWR);
+    if (reader_.joinable()) reader_.join();
+  }
+  std::size_t received() {
+    std::lock_guard lock(mutex_);
+    return samples_.size() + estimates_.size();
+  }
+  // After stop().
+  const std::vector<std::uint64_t>& samples() const { return samples_; }
+  const std::vector<std::uint64_t>& estimates() const { return estimates_; }
+
+ private:
+  enum Subscription : std::uint32_t { kSample = 7, kEstimate = 8 };
+  // Message data: opcode 0x01, subscription id (4 bytes, little-endian), time (8), payload.
+  void take(const std::string& frame) {
+    if (frame.size() < 13 || frame[0] != 0x01) return;
+    std::uint32_t subscription = 0;
+    for (int i = 0; i < 4; ++i) subscription |= std::uint32_t{static_cast<std::uint8_t>(frame[1 + i])} << (8 * i);
+    const json payload = json::parse(frame.substr(13));
+    std::lock_guard lock(mutex_);
+    if (subscription == kSample) samples_.push_back(payload.at("seq"));
+    if (subscription == kEstimate) estimates_.push_back(payload.at("estimate").at("seq"));
+  }
+
+  boost::asio::io_context io_;
+  boost::beast::websocket::stream<boost::asio::ip::tcp::socket> stream_{io_};
+  std::thread reader_;
+  std::mutex mutex_;
+  std::vector<std::uint64_t> samples_, estimates_;
+};
+
 class FoxgloveTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() { install_error_ = install_npm_packages(); }
@@ -138,6 +281,28 @@ class FoxgloveTest : public ::testing::Test {
     return totals.contains("foxglove_dropped") ? totals.at("foxglove_dropped") : 0;
   }
 
+  // The estimates of the session's run stored so far.
+  std::vector<store::Estimate> stored_estimates() const {
+    std::vector<store::Estimate> estimates;
+    const store::Store store(db_, {.read_only = true});
+    store.for_each_estimate(store.runs(store.sessions().at(0).id).at(0).id,
+                            [&](const store::Estimate& e) { estimates.push_back(e); });
+    return estimates;
+  }
+  // `frames` written in batches, each once `client` has had the last on `link`: however slow this machine, that
+  // client is never behind by more than a batch (some 40 KB with 50 frames) and that burst.
+  void write_in_step_with(NodeClient& client, const std::string& link, cli::PtyPair& pty,
+                          const std::vector<std::vector<std::uint8_t>>& frames, std::size_t batch) {
+    for (std::size_t first = 0; first < frames.size(); first += batch) {
+      const std::size_t last = std::min(first + batch, frames.size());
+      write_paced(pty, {frames.begin() + static_cast<std::ptrdiff_t>(first),
+                        frames.begin() + static_cast<std::ptrdiff_t>(last)});
+      ASSERT_TRUE(eventually([&] { return client.on(link + "/sample").size() >= last; }))
+          << client.on(link + "/sample").size() << " samples\n"
+          << client.errors() << daemon_->log();
+    }
+  }
+
   static inline std::string install_error_;
   TempDir dir_;
   fs::path config_ = dir_ / "imubridge.toml", db_ = dir_ / "run.db";
@@ -156,35 +321,12 @@ TEST_F(FoxgloveTest, TheClientLibraryGetsEverySampleEstimateAndEventTheStoreHold
   NodeClient client(url(), dir_ / "client.jsonl");
   wait_for_subscriptions(6);
 
-  const auto info = client.lines("serverInfo");
-  ASSERT_EQ(info.size(), 1u) << client.errors();
-  EXPECT_EQ(info[0].at("info").at("name"), "imubridge " IMUBRIDGE_VERSION);
-  const auto advertised = client.lines("advertise");
-  ASSERT_EQ(advertised.size(), 1u);
-  std::vector<std::string> topics;
-  std::set<std::int64_t> ids;
-  for (const json& channel : advertised[0].at("channels")) {
-    topics.push_back(channel.at("topic"));
-    ids.insert(channel.at("id").get<std::int64_t>());
-    EXPECT_EQ(channel.at("encoding"), "json");
-    EXPECT_EQ(channel.at("schemaEncoding"), "jsonschema");
-    EXPECT_TRUE(json::parse(channel.at("schema").get<std::string>()).at("properties").is_object());
-  }
-  EXPECT_EQ(topics, (std::vector<std::string>{"imu/sample", "imu/estimate", "imu/event", "imu2/sample", "imu2/estimate",
-                                              "imu2/event"}));
-  EXPECT_EQ(ids.size(), topics.size());
+  expect_advertised(client, {"imu", "imu2"});
 
   write_paced(imu, imu_frames);
   write_paced(imu2, imu2_frames);
   ASSERT_TRUE(wait_for_samples(db_, imu_frames.size() + imu2_frames.size())) << daemon_->log();
   // Every sample and estimate committed so far reached the client: the server has nothing more to send.
-  const auto stored_estimates = [&] {
-    std::vector<store::Estimate> estimates;
-    const store::Store store(db_, {.read_only = true});
-    store.for_each_estimate(store.runs(store.sessions().at(0).id).at(0).id,
-                            [&](const store::Estimate& e) { estimates.push_back(e); });
-    return estimates;
-  };
   ASSERT_TRUE(eventually([&] {
     return client.on("imu/sample").size() == imu_frames.size() &&
            client.on("imu2/sample").size() == imu2_frames.size() &&
@@ -199,64 +341,19 @@ TEST_F(FoxgloveTest, TheClientLibraryGetsEverySampleEstimateAndEventTheStoreHold
   const auto all_estimates = stored_estimates();
   for (const store::Link& link : store.links(session)) {
     SCOPED_TRACE(link.name);
-    // Samples: every one, in order, as stored, stamped with their chunk's arrival.
-    std::vector<protocol::Sample> stored;
-    store.for_each_sample(session, link.id, [&](const protocol::Sample& s) { stored.push_back(s); });
-    const auto& samples = client.on(link.name + "/sample");
-    ASSERT_EQ(samples.size(), stored.size());
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-      const json& m = samples[i];
-      const protocol::Sample& s = stored[i];
-      ASSERT_EQ(m.at("seq").get<std::uint64_t>(), s.seq);
-      EXPECT_EQ(m.at("link"), link.name);
-      EXPECT_EQ(m.at("timestamp").get<double>(), static_cast<double>(s.device_time_us) / 1e6);
-      for (std::size_t axis = 0; axis < 3; ++axis) {
-        const char* name = std::array{"x", "y", "z"}[axis];
-        EXPECT_TRUE(same(m.at("accel").at(name), s.accel[axis])) << m;
-        EXPECT_TRUE(same(m.at("gyro").at(name), s.gyro[axis])) << m;
-        if (s.has_mag) {
-          EXPECT_TRUE(same(m.at("mag").at(name), s.mag[axis])) << m;
-        }
-      }
-      EXPECT_EQ(m.contains("mag"), s.has_mag);
-      EXPECT_EQ(m.contains("temperature"), s.has_temperature);
-      if (s.has_temperature) {
-        EXPECT_TRUE(same(m.at("temperature"), s.temperature_c)) << m;
-      }
-      EXPECT_EQ(m.at("receiveTime").get<std::int64_t>(), m.at("recv_wall_ns").get<std::int64_t>());
-    }
-
-    // Estimates: every one the live run stored for the link, in order.
+    std::vector<protocol::Sample> samples;
+    store.for_each_sample(session, link.id, [&](const protocol::Sample& s) { samples.push_back(s); });
+    expect_samples_as_stored(client.on(link.name + "/sample"), samples, link.name);
     std::vector<store::Estimate> estimates;
     std::copy_if(all_estimates.begin(), all_estimates.end(), std::back_inserter(estimates),
                  [&](const store::Estimate& e) { return e.link_id == link.id; });
-    const auto& messages = client.on(link.name + "/estimate");
-    ASSERT_EQ(messages.size(), estimates.size());
-    ASSERT_GE(messages.size(), stored.size() / 2);
-    for (std::size_t i = 0; i < messages.size(); ++i) {
-      const json& e = messages[i].at("estimate");
-      ASSERT_EQ(e.at("seq").get<std::uint64_t>(), estimates[i].seq);
-      EXPECT_TRUE(same(e.at("fx"), estimates[i].fx)) << e;
-      EXPECT_TRUE(same(e.at("fy"), estimates[i].fy)) << e;
-      EXPECT_TRUE(same(e.at("vx"), estimates[i].vx)) << e;
-      EXPECT_TRUE(same(e.at("vy"), estimates[i].vy)) << e;
-      EXPECT_TRUE(same(e.at("sx"), std::sqrt(estimates[i].var_vx))) << e;
-      EXPECT_TRUE(same(e.at("sy"), std::sqrt(estimates[i].var_vy))) << e;
-      EXPECT_EQ(messages[i].at("receiveTime").get<std::int64_t>(), messages[i].at("recv_wall_ns").get<std::int64_t>());
-    }
-
-    // Events: the gaps the recorder stored for the link, each as counted there; nothing dropped.
-    std::vector<store::Event> gaps;
+    EXPECT_GE(estimates.size(), samples.size() / 2);
+    expect_estimates_as_stored(client.on(link.name + "/estimate"), estimates);
+    std::vector<store::Event> gaps;  // nothing dropped: the events are the recorder's gaps alone
     for (const store::Event& e : store.events(session)) {
       if (e.link_id == link.id && e.kind == "sequence_gap") gaps.push_back(e);
     }
-    const auto& events = client.on(link.name + "/event");
-    ASSERT_EQ(events.size(), gaps.size());
-    for (std::size_t i = 0; i < events.size(); ++i) {
-      EXPECT_EQ(events[i].at("kind"), "sequence_gap");
-      EXPECT_EQ(events[i].at("link"), link.name);
-      EXPECT_EQ(events[i].at("count").get<std::int64_t>(), gaps[i].count);
-    }
+    expect_gap_events_as_stored(client.on(link.name + "/event"), gaps, link.name);
   }
   EXPECT_EQ(client.on("imu/event").size(), 1u);
   ASSERT_FALSE(client.on("imu/event").empty());
@@ -275,21 +372,7 @@ TEST_F(FoxgloveTest, AClientThatStopsReadingLosesItsOwnMessagesAndHoldsUpNoOne) 
   cli::PtyPair pty(dir_ / "imu");
   start({"imu"}, "client_queue_kib = 512\n");
 
-  // The slow client: Boost.Beast, subscribed to every channel, a small receive buffer, and it does not read.
-  boost::asio::io_context io;
-  boost::beast::websocket::stream<boost::asio::ip::tcp::socket> slow(io);
-  slow.next_layer().open(boost::asio::ip::tcp::v4());
-  slow.next_layer().set_option(boost::asio::socket_base::receive_buffer_size(4096));
-  slow.next_layer().connect({boost::asio::ip::make_address("127.0.0.1"), port_});
-  slow.set_option(boost::beast::websocket::stream_base::decorator([](boost::beast::websocket::request_type& request) {
-    request.set(boost::beast::http::field::sec_websocket_protocol, "foxglove.websocket.v1");
-  }));
-  slow.handshake("127.0.0.1", "/");
-  slow.text(true);
-  enum Subscription : std::uint32_t { kSample = 7, kEstimate = 8, kEvent = 9 };
-  slow.write(boost::asio::buffer(std::string(
-      R"({"op":"subscribe","subscriptions":[{"id":7,"channelId":1},{"id":8,"channelId":2},{"id":9,"channelId":3}]})")));
-
+  StalledClient slow(port_);
   NodeClient client(url(), dir_ / "client.jsonl");
   wait_for_subscriptions(6);
   ASSERT_EQ(client.lines("advertise").size(), 1u);
@@ -300,58 +383,25 @@ TEST_F(FoxgloveTest, AClientThatStopsReadingLosesItsOwnMessagesAndHoldsUpNoOne) 
   ASSERT_EQ(channels[1].at("id"), 2);
   ASSERT_EQ(channels[2].at("id"), 3);
 
-  // Written in batches, each once the reading client has had the last: however slow this machine, that client is
-  // never behind by more than a batch (some 40 KB) and that burst, well within its queue. The slow client is behind by
+  // The reading client is never behind by more than a batch, well within its queue; the slow client is behind by
   // everything.
-  constexpr std::size_t kBatch = 50;
-  for (std::size_t first = 0; first < kFrames; first += kBatch) {
-    write_paced(pty, {frames.begin() + static_cast<std::ptrdiff_t>(first),
-                      frames.begin() + static_cast<std::ptrdiff_t>(first + kBatch)});
-    ASSERT_TRUE(eventually([&] { return client.on("imu/sample").size() >= first + kBatch; }))
-        << client.on("imu/sample").size() << " samples\n"
-        << client.errors() << daemon_->log();
-  }
+  write_in_step_with(client, "imu", pty, frames, 50);
+  if (HasFatalFailure()) return;
   ASSERT_TRUE(wait_for_samples(db_, kFrames)) << daemon_->log();
   // The estimates that came with the last sample, then the server has sent all it will.
-  const auto stored_estimates = [&] {
-    std::size_t n = 0;
-    const store::Store store(db_, {.read_only = true});
-    store.for_each_estimate(store.runs(store.sessions().at(0).id).at(0).id, [&](const store::Estimate&) { ++n; });
-    return n;
-  };
-  ASSERT_TRUE(eventually([&] { return client.on("imu/estimate").size() == stored_estimates(); }))
-      << client.on("imu/estimate").size() << " " << stored_estimates();
+  ASSERT_TRUE(eventually([&] { return client.on("imu/estimate").size() == stored_estimates().size(); }))
+      << client.on("imu/estimate").size() << " " << stored_estimates().size();
   const std::size_t sent = client.on("imu/sample").size() + client.on("imu/estimate").size();
   // Drops are reported every 5 s: logged, and stored as events of the link.
   ASSERT_TRUE(eventually([&] { return stored_drops() > 0; })) << daemon_->log();
 
   // The slow client reads again: it gets what its queue and the sockets held, in order, and misses the rest. What it
   // misses is what the server counted as dropped: the two add up to every sample and estimate sent.
-  std::mutex mutex;
-  std::vector<std::uint64_t> slow_samples, slow_estimates;
-  std::thread reader([&] {
-    boost::beast::flat_buffer buffer;
-    boost::system::error_code ec;
-    while (slow.read(buffer, ec), !ec) {
-      const std::string frame = boost::beast::buffers_to_string(buffer.data());
-      buffer.consume(buffer.size());
-      if (!slow.got_binary()) continue;
-      if (frame.size() < 13 || frame[0] != 0x01) continue;  // message data: opcode, subscription, time, payload
-      std::uint32_t subscription = 0;
-      for (int i = 0; i < 4; ++i) subscription |= std::uint32_t{static_cast<std::uint8_t>(frame[1 + i])} << (8 * i);
-      const json payload = json::parse(frame.substr(13));
-      std::lock_guard lock(mutex);
-      if (subscription == kSample) slow_samples.push_back(payload.at("seq"));
-      if (subscription == kEstimate) slow_estimates.push_back(payload.at("estimate").at("seq"));
-    }
-  });
+  slow.start_reading();
   json foxglove;
   std::size_t received = 0;
   const bool adds_up = eventually([&] {
-    {
-      std::lock_guard lock(mutex);
-      received = slow_samples.size() + slow_estimates.size();
-    }
+    received = slow.received();
     foxglove = foxglove_counters();
     return received + foxglove.at("client_dropped").get<std::size_t>() == sent;
   });
@@ -362,18 +412,17 @@ TEST_F(FoxgloveTest, AClientThatStopsReadingLosesItsOwnMessagesAndHoldsUpNoOne) 
                       });
   daemon_->signal(SIGTERM);
   const int exit_code = daemon_->wait();
-  ::shutdown(slow.next_layer().native_handle(), SHUT_RDWR);  // should the server not have closed it
-  reader.join();
+  slow.stop();
   ASSERT_TRUE(adds_up) << received << " received by the slow client + " << foxglove << " != " << sent;
   ASSERT_TRUE(stored) << foxglove << " " << stored_drops();
   ASSERT_EQ(exit_code, 0) << daemon_->log();
 
   // The slow client lost most of it, in order, without a message twice.
   EXPECT_GT(foxglove.at("client_dropped").get<std::size_t>(), sent / 2) << foxglove;
-  EXPECT_LT(slow_samples.size(), kFrames);
-  EXPECT_TRUE(std::is_sorted(slow_samples.begin(), slow_samples.end()));
-  EXPECT_EQ(std::adjacent_find(slow_samples.begin(), slow_samples.end()), slow_samples.end());
-  EXPECT_TRUE(std::is_sorted(slow_estimates.begin(), slow_estimates.end()));
+  EXPECT_LT(slow.samples().size(), kFrames);
+  EXPECT_TRUE(std::is_sorted(slow.samples().begin(), slow.samples().end()));
+  EXPECT_EQ(std::adjacent_find(slow.samples().begin(), slow.samples().end()), slow.samples().end());
+  EXPECT_TRUE(std::is_sorted(slow.estimates().begin(), slow.estimates().end()));
   // The reading client missed nothing, and neither did the recording.
   EXPECT_EQ(committed_samples(db_).size(), kFrames);
   const auto& samples = client.on("imu/sample");

@@ -64,36 +64,36 @@ class McapExport : public ::testing::Test {
   fs::path db_ = dir_ / "flights.db";
 };
 
-TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
-  const std::int64_t session = simulated_session(30);
-  const fs::path file = dir_ / "flight.mcap";
-  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session) +
-                               " --format mcap --out " + file.string());
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  const json read = read_with_mcap_core(file);
-
-  const store::Store store(db_, {.read_only = true});
+// What the store holds of one session and its one run: what the export must carry, message for message.
+struct StoredSession {
   std::vector<protocol::Sample> samples;
-  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { samples.push_back(s); });
-  const auto runs = store.runs(session);
-  ASSERT_EQ(runs.size(), 1u);
   std::vector<store::Estimate> estimates;
-  store.for_each_estimate(runs[0].id, [&](const store::Estimate& e) { estimates.push_back(e); });
   std::vector<store::ReferenceRow> reference;
-  store.for_each_reference(session, [&](const store::ReferenceRow& row) { reference.push_back(row); });
-  const auto events = store.events(session);
-  ASSERT_GT(samples.size(), 1000u);
-  ASSERT_GT(estimates.size(), 1000u);
-  ASSERT_GT(reference.size(), 1000u);
-  ASSERT_FALSE(events.empty());
+  std::vector<store::Event> events;
+};
 
-  // The summary, the index and a plain pass from the start agree with the store's counts.
+StoredSession read_stored_session(const fs::path& db, std::int64_t session) {
+  const store::Store store(db, {.read_only = true});
+  StoredSession stored;
+  store.for_each_sample(session, std::nullopt, [&](const protocol::Sample& s) { stored.samples.push_back(s); });
+  const auto runs = store.runs(session);
+  EXPECT_EQ(runs.size(), 1u);
+  if (!runs.empty()) {
+    store.for_each_estimate(runs[0].id, [&](const store::Estimate& e) { stored.estimates.push_back(e); });
+  }
+  store.for_each_reference(session, [&](const store::ReferenceRow& row) { stored.reference.push_back(row); });
+  stored.events = store.events(session);
+  return stored;
+}
+
+// The summary, the index and a plain pass from the start agree with the store's counts.
+void expect_counts_agree(const json& read, const StoredSession& stored) {
   const json& topics = read["topics"];
-  const std::map<std::string, std::size_t> want{{"/sim/imu", samples.size()},
-                                                {"/sim/estimate", estimates.size()},
-                                                {"/reference/pose", reference.size()},
-                                                {"/reference/velocity", reference.size()},
-                                                {"/events", events.size()}};
+  const std::map<std::string, std::size_t> want{{"/sim/imu", stored.samples.size()},
+                                                {"/sim/estimate", stored.estimates.size()},
+                                                {"/reference/pose", stored.reference.size()},
+                                                {"/reference/velocity", stored.reference.size()},
+                                                {"/events", stored.events.size()}};
   ASSERT_EQ(topics.size(), want.size()) << topics.dump().substr(0, 500);
   std::size_t total = 0;
   for (const auto& [topic, n] : want) {
@@ -116,10 +116,11 @@ TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
   EXPECT_EQ(topics["/events"]["schema"], "foxglove.Log");
   EXPECT_EQ(topics["/reference/pose"]["schema"], "foxglove.PoseInFrame");
   EXPECT_EQ(topics["/sim/imu"]["metadata"]["protocol"], "imubridge");
+}
 
-  // Samples, message for message; times on the monotonic line through the link's first sample.
+// Samples, message for message; times on the monotonic line through the link's first sample.
+void expect_samples_equal(const json& sample_messages, const std::vector<protocol::Sample>& samples) {
   const std::int64_t origin = samples.front().recv_mono_ns;
-  const json& sample_messages = topics["/sim/imu"]["messages"];
   for (std::size_t i = 0; i < samples.size(); ++i) {
     const auto& s = samples[i];
     const json& m = sample_messages[i];
@@ -139,10 +140,12 @@ TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
     ASSERT_TRUE(d["mx"].is_null() == !s.has_mag);
   }
   EXPECT_EQ(sample_messages.front()["log_time"], std::to_string(origin));
+}
 
-  const json& estimate_messages = topics["/sim/estimate"]["messages"];
-  for (std::size_t i = 0; i < estimates.size(); ++i) {
-    const auto& e = estimates[i];
+void expect_estimates_equal(const json& estimate_messages, const StoredSession& stored) {
+  const std::int64_t first_device_us = stored.samples.front().device_time_us;
+  for (std::size_t i = 0; i < stored.estimates.size(); ++i) {
+    const auto& e = stored.estimates[i];
     const json& d = estimate_messages[i]["data"];
     ASSERT_EQ(d["seq"], e.seq) << i;
     ASSERT_TRUE(same(d["device_t_s"], e.t_s)) << i;
@@ -150,14 +153,17 @@ TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
     ASSERT_TRUE(same(d["vx"], e.vx) && same(d["vy"], e.vy)) << i;
     ASSERT_TRUE(same(d["var_vx"], e.var_vx) && same(d["var_vy"], e.var_vy)) << i;
     // An estimate has its sample's session time.
-    const double sample_t = (static_cast<double>(std::llround(e.t_s * 1e6)) - samples.front().device_time_us) / 1e6;
+    const double sample_t = (static_cast<double>(std::llround(e.t_s * 1e6)) - first_device_us) / 1e6;
     ASSERT_EQ(d["session_t_s"].get<double>(), sample_t) << i;
   }
+}
 
+void expect_reference_equal(const json& topics, const StoredSession& stored) {
+  const std::int64_t origin = stored.samples.front().recv_mono_ns;
   const json& poses = topics["/reference/pose"]["messages"];
   const json& velocities = topics["/reference/velocity"]["messages"];
-  for (std::size_t i = 0; i < reference.size(); ++i) {
-    const auto& row = reference[i];
+  for (std::size_t i = 0; i < stored.reference.size(); ++i) {
+    const auto& row = stored.reference[i];
     const json& pose = poses[i]["data"]["pose"];
     ASSERT_EQ(poses[i]["log_time"], std::to_string(row.t_ns)) << i;
     ASSERT_EQ(poses[i]["data"]["timestamp"]["sec"], row.t_ns / 1'000'000'000) << i;
@@ -168,9 +174,9 @@ TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
     ASSERT_TRUE(same(velocities[i]["data"]["vx"], (*row.velocity)[0])) << i;
     ASSERT_EQ(velocities[i]["data"]["session_t_s"].get<double>(), static_cast<double>(row.t_ns - origin) / 1e9);
   }
-  EXPECT_EQ(read["statistics"]["message_start_time"], std::to_string(std::min(origin, reference.front().t_ns)));
+}
 
-  const json& logs = topics["/events"]["messages"];
+void expect_events_equal(const json& logs, const std::vector<store::Event>& events) {
   for (std::size_t i = 0; i < events.size(); ++i) {
     const auto& e = events[i];
     const json& d = logs[i]["data"];
@@ -184,6 +190,29 @@ TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
     ASSERT_EQ(d["message"], message) << i;
     ASSERT_EQ(d["name"], e.link_id ? "sim" : "session") << i;
   }
+}
+
+TEST_F(McapExport, EveryMessageReadsBackThroughMcapCoreEqualToTheStore) {
+  const std::int64_t session = simulated_session(30);
+  const fs::path file = dir_ / "flight.mcap";
+  const auto r = run_imubridge("export --db " + db_.string() + " --session " + std::to_string(session) +
+                               " --format mcap --out " + file.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json read = read_with_mcap_core(file);
+  const StoredSession stored = read_stored_session(db_, session);
+  ASSERT_GT(stored.samples.size(), 1000u);
+  ASSERT_GT(stored.estimates.size(), 1000u);
+  ASSERT_GT(stored.reference.size(), 1000u);
+  ASSERT_FALSE(stored.events.empty());
+
+  const json& topics = read["topics"];
+  expect_counts_agree(read, stored);
+  expect_samples_equal(topics["/sim/imu"]["messages"], stored.samples);
+  expect_estimates_equal(topics["/sim/estimate"]["messages"], stored);
+  expect_reference_equal(topics, stored);
+  EXPECT_EQ(read["statistics"]["message_start_time"],
+            std::to_string(std::min(stored.samples.front().recv_mono_ns, stored.reference.front().t_ns)));
+  expect_events_equal(topics["/events"]["messages"], stored.events);
 }
 
 TEST_F(McapExport, SessionWithoutRunsHasNoEstimateChannelAndEmptyTextSurvives) {
