@@ -331,6 +331,7 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   std::future<Reference> reference_read;
   if (options.reference != ReferenceUse::none) reference_read = start_reading_reference(store, session);
   const std::vector<std::int64_t> recv_mono_ns = read_samples(store, session, out);
+  out.flight = estimator::flight_identity(out.series);
   out.airborne = airborne_from_events(store, session, SeriesClock(out.series.t, recv_mono_ns));
   if (options.reference == ReferenceUse::none) {
     to_body_axes(out, declared);

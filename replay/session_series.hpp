@@ -49,6 +49,10 @@ struct SessionSeriesCounts {
 struct SessionSeries {
   estimator::ImuSeries series;  // t: seconds since the link's first sample, from device_time_us; FRD body axes
   std::int64_t link_id = 0;
+  // The flight's identity (estimator::flight_identity) taken from the link's usable samples as stored, before the
+  // reference's span or the axes change them: the same however the session is read, so that a PARAMS.json fitted
+  // with the reference knows its own flight when it is replayed without one (estimator::for_flight).
+  std::string flight;
   SessionSeriesCounts counts;
   estimator::AxesResolution axes;                                  // how the IMU's axes were turned into the body's
   std::optional<estimator::ReferenceAlignment> reference_alignment;  // with a reference: its attitude's frame

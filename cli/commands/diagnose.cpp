@@ -299,6 +299,7 @@ void add_reading(const DiagnosedData& data, dg::Diagnosis& diagnosis) {
     diagnosis.imu_axes = session.axes.description;
     diagnosis.warnings.insert(diagnosis.warnings.begin(), session.warnings.begin(), session.warnings.end());
     diagnosis.final_params.identification.reference_delay = recorded_reference_delay(session);
+    diagnosis.final_params.conditions_flight = session.flight;  // as replay and evaluate will read it
     print_reference_delay(session);  // with the summary: an error before it stays one line
   }
 }

@@ -113,7 +113,7 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
   est::TimeWindow scored;
   if (file) {
     std::string left;
-    const est::ModelParams params = est::for_flight(*file, est::flight_identity(session.series), &left);
+    const est::ModelParams params = est::for_flight(*file, session.flight, &left);
     if (!left.empty()) std::fprintf(stderr, "session %lld: %s\n", static_cast<long long>(id), left.c_str());
     const est::VelocityEvaluation e =
         est::evaluate_velocity(session.series, params.full, window, est::config_for(params));

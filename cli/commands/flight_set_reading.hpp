@@ -76,7 +76,7 @@ inline FlightSetReading read_flight_set(const store::Store& store, const std::ve
     const std::optional<std::string>& text = fits ? windows.train : windows.validate;
     const estimator::TimeWindow window = estimator::clip(text ? estimator::parse_window(*text, span) : span,
                                                          session.series.t, fits ? "fit" : "validation");
-    out.identity += (i == 0 ? "" : ",") + estimator::flight_identity(session.series);
+    out.identity += (i == 0 ? "" : ",") + session.flight;
     out.every_reference = out.every_reference && session.series.reference.has_value();
     out.flights.push_back(session.series);
     out.windows.push_back(window);

@@ -315,6 +315,7 @@ int run(const IdentifyCliOptions& o) {
   CheckedFit checked = fit_checked(session.series, options, limits);
   est::IdentifyResult& result = checked.result;
   result.params.identification.reference_delay = recorded_reference_delay(session);
+  result.params.conditions_flight = session.flight;  // as replay and evaluate will read it
 
   // Refused, not warned about: a model no airframe has flies worse than none (docs/identification.md, "Plausibility").
   const std::vector<est::Implausibility>& implausible = checked.implausible;

@@ -141,8 +141,8 @@ int replay_into_run(const ReplayCommandOptions& o) {
     const replay::SessionSeries flight = replay::read_session_series(
         store, o.session, {.link = o.link.empty() ? std::nullopt : std::optional(link_id(store, session, o.link))});
     std::string left;
-    options.params = estimator::for_flight(estimator::parse_params(read_file(o.params), o.params),
-                                           estimator::flight_identity(flight.series), &left);
+    options.params =
+        estimator::for_flight(estimator::parse_params(read_file(o.params), o.params), flight.flight, &left);
     if (!left.empty()) std::fprintf(stderr, "%s\n", left.c_str());
   }
   options.play = {.from_s = o.from_s, .to_s = o.to_s, .speed = parse_speed(o.speed.empty() ? "max" : o.speed)};

@@ -223,6 +223,30 @@ TEST_F(ReplayCommand, ARadioTakesItsLinksDeclaredAxesLiveAsInReplay) {
   EXPECT_EQ(mismatches.size(), 1u);
 }
 
+// A model fitted with the reference flies its own flight as that flight's in replay, though the reference began
+// after the IMU and its span dropped the first samples the fit saw: it is not taken for a calibration carried to
+// another flight (whose offset and wind the live filter would count as unknown).
+TEST_F(ReplayCommand, AModelFittedWithALateReferenceKnowsItsOwnFlight) {
+  const std::int64_t session = simulate("imubridge", 30);
+  const std::string late = "sqlite3 " + db_.string() +
+                           " 'DELETE FROM reference WHERE t_ns < (SELECT MIN(t_ns) FROM reference) + 2000000000'";
+  ASSERT_EQ(std::system(late.c_str()), 0);
+  const fs::path params = dir_ / "own.json";
+  const auto fitted = run_imubridge("identify --db " + db_.string() + " --session " + std::to_string(session) +
+                                    " --model paper --velocity reference --train 0:60% --validate 60%: --out " +
+                                    params.string());
+  ASSERT_EQ(fitted.exit_code, 0) << fitted.err;
+  const auto replayed = run_imubridge(replay_args(session) + " --params " + params.string());
+  ASSERT_EQ(replayed.exit_code, 0) << replayed.err;
+
+  const store::Store store(db_, {.read_only = true});
+  const auto runs = store.runs(session);
+  ASSERT_EQ(runs.size(), 1u);
+  const json flown = json::parse(runs[0].info.params_json);
+  EXPECT_EQ(flown.at("conditions").at("flight"), json::parse(slurp(params)).at("conditions").at("flight"));
+  EXPECT_FALSE(flown.at("conditions").at("transferred").get<bool>());
+}
+
 TEST_F(ReplayCommand, FromToReplaysTheChunksReceivedInTheWindow) {
   const std::int64_t session = simulate("imubridge", 2.0);  // one frame per chunk, received at the sample's time
   const std::int64_t run = run_for_id(replay_args(session) + " --from 0.5 --to 1.5");

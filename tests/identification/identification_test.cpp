@@ -523,6 +523,12 @@ TEST_F(SessionSeriesTest, TimesByTheDeviceClockAndInterpolatesTheReferenceAtRece
 
   const replay::SessionSeries other = replay::read_session_series(store, session, {.link = 2});
   EXPECT_EQ(other.series.size(), 5u);
+
+  // One flight, one identity, however it is read (here the reference's span drops the first sample, and other axes
+  // turn every one): a model fitted with the reference knows its own flight when replayed without it.
+  EXPECT_EQ(with.flight, plain.flight);
+  EXPECT_EQ(replay::read_session_series(store, session, {.imu_axes = "flu"}).flight, plain.flight);
+  EXPECT_NE(other.flight, plain.flight);
 }
 
 TEST_F(SessionSeriesTest, DerivesVelocityFromPositionsAndNamesWhatIsMissing) {
