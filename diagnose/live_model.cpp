@@ -60,6 +60,7 @@ estimator::ModelParams live_params(const Model& model, std::span<const double> p
   for (std::size_t e = 0; e < model.effects().size(); ++e) {
     const Effect& effect = *model.effects()[e];
     out.effects.emplace_back(effect.name());
+    if (const auto why = effect.live_refusal()) out.not_live[std::string(effect.name())] = *why;
     const std::size_t first = model.effect_offset(e), size = model.effect_size(e);
     effect.to_live(p.subspan(first, size), all.subspan(first, size), context, full);
   }

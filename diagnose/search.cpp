@@ -616,7 +616,7 @@ State measure_candidate(const StepContext& step, const Effect& effect, const Mod
   const Search& search = step.search;
   const State& current = step.current;
   State candidate = settle(model, std::move(best), search.train, search.validation);
-  judge(search, model, candidate, estimator::live_effect_refusal(effect.name()) ? &current : nullptr);
+  judge(search, model, candidate, effect.live_refusal() ? &current : nullptr);
   trial.rmse_train = candidate.summary.rmse_train;
   trial.rmse_validation = candidate.summary.rmse_validation;
   if (candidate.summary.velocity) trial.velocity_validation = candidate.summary.velocity->validation.horizontal;

@@ -24,19 +24,8 @@ constexpr double kDegPerRad = 180.0 / kPi;
 // difference means a person edited one and not the other.
 constexpr double kAngleAgreement = 1e-9;  // rad
 
-// diagnose's library (diagnose/effects/library.cpp), in its order. The estimator does not link diagnose; a new
-// effect there must be added here (tests/diagnose/live_model_test.cpp fails until it is); how the live estimator runs it is
-// the effect's own Effect::to_live.
-constexpr std::array<std::string_view, 12> kEffects = {
-    "linear_drag", "quadratic_drag", "accel_bias",  "gyro_bias", "thrust", "time_offset",
-    "accel_scale", "accel_cross",    "lever_arm_z", "vibration", "wind",   "self_consistent_velocity"};
-constexpr std::string_view kVibrationRefusal =
-    "vibration is a sinusoid whose phase belongs to the identified session's clock; live, vibration is measurement "
-    "noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with --lowpass or "
-    "--ignore-band";
-
-constexpr std::array<std::string_view, 6> kTopKeys = {"version",    "paper",   "full",
-                                                      "conditions", "effects", "identification"};
+constexpr std::array<std::string_view, 7> kTopKeys = {"version", "paper",    "full",          "conditions",
+                                                      "effects", "not_live", "identification"};
 // The flight's conditions (params.hpp): written in "conditions", still read from "full" in files written before.
 constexpr std::array<std::string_view, 7> kConditionKeys = {
     "flight", "transferred", "wind", "wind_heading", "wind_heading_deg", "accel_bias", "gyro_bias"};
@@ -279,22 +268,21 @@ std::vector<std::string> read_effects(const json& j, const std::string& path) {
   for (const json& name : j) {
     if (!name.is_string()) wrong_type(path + "[]", "an effect name (a string)", name);
     out.push_back(name.get<std::string>());
-    if (auto why = live_effect_refusal(out.back())) throw std::invalid_argument("PARAMS.json: " + path + ": " + *why);
   }
   return out;
 }
 
-}  // namespace
-
-std::span<const std::string_view> known_effects() { return kEffects; }
-
-std::optional<std::string> live_effect_refusal(std::string_view effect) {
-  if (effect == "vibration") return "refused: " + std::string(kVibrationRefusal);
-  if (std::find(kEffects.begin(), kEffects.end(), effect) != kEffects.end()) return std::nullopt;
-  std::string message = "unknown effect \"" + std::string(effect) + "\"";
-  if (const auto guess = nearest(effect, kEffects)) return message + " (did you mean \"" + std::string(*guess) + "\"?)";
-  return message + " (diagnose's effects: " + listing(kEffects) + ")";
+// A model with an effect the live estimator cannot run is refused, with the reason diagnose wrote for it.
+void refuse_not_live(const json& j, const std::string& path) {
+  if (!j.is_object()) wrong_type(path, "an object of effect names and reasons", j);
+  for (const auto& [name, why] : j.items()) {
+    if (!why.is_string()) wrong_type(join(path, name), "the reason (a string)", why);
+    throw std::invalid_argument("PARAMS.json: " + join(path, name) +
+                                ": the live estimator cannot run it: " + why.get<std::string>());
+  }
 }
+
+}  // namespace
 
 std::string describe_conditions(const FullModelParams& p) {
   std::string out;
@@ -379,6 +367,7 @@ void to_json(json& j, const ModelParams& p) {
              {"gyro_bias", to_array(f.gyro_bias)}}},
            {"effects", p.effects},
            {"identification", p.identification}};
+  if (!p.not_live.empty()) j["not_live"] = p.not_live;
 }
 
 void from_json(const json& j, ModelParams& p) {
@@ -400,6 +389,7 @@ void from_json(const json& j, ModelParams& p) {
   if (j.contains("conditions"))
     read_conditions(j.at("conditions"), "conditions", p.full, p.conditions_flight, p.transferred);
   if (j.contains("effects")) p.effects = read_effects(j.at("effects"), "effects");
+  if (j.contains("not_live")) refuse_not_live(j.at("not_live"), "not_live");
   if (j.contains("identification")) p.identification = read_identification(j.at("identification"), "identification");
 }
 

@@ -65,9 +65,13 @@ struct ModelParams {
   // filter says so in its variance (config_for, kTransferredOffsetStd). Written with the run's parameters, so a replay
   // estimates as the live run did.
   bool transferred = false;
-  // The names of diagnose's effects the model includes, in the order diagnose added them (docs/effects.md). Every
-  // one must be an effect the live estimator runs (live_effect_refusal()).
+  // The names of diagnose's effects the model includes, in the order diagnose added them (docs/effects.md): what
+  // the model was built from. What each adds to the live estimator is in `full` (Effect::to_live), so the estimator
+  // needs no list of them.
   std::vector<std::string> effects;
+  // The effects of the model the live estimator cannot run, each with why (diagnose's Effect::live_refusal):
+  // written so, a file is refused when read, with that reason, so that no filter flies a model it lacks a part of.
+  std::map<std::string, std::string> not_live;
   Identification identification;
 
   friend bool operator==(const ModelParams&, const ModelParams&) = default;
@@ -82,18 +86,11 @@ std::string describe_conditions(const FullModelParams& params);
 // wind.
 ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left = nullptr);
 
-// Why the live drag-velocity estimator cannot run diagnose's effect `effect`, or nullopt when it runs it. An unknown
-// name is refused with the nearest known one ("did you mean"); `vibration` is refused with the reason.
-std::optional<std::string> live_effect_refusal(std::string_view effect);
-// The effects PARAMS.json may name: diagnose's library, in its order (the estimator does not link diagnose;
-// tests/diagnose/live_model_test.cpp holds the two equal).
-std::span<const std::string_view> known_effects();
-
 // Reading is strict. It fills missing keys with the defaults (so files written before a key existed still read)
 // and takes radians or degrees when only one is given. It throws std::invalid_argument, naming the key's path
 // ("full.accel_cross"), for: an unknown key (with "did you mean" the nearest valid one when it is close), a value
 // of the wrong type (with the type expected), radians and degrees that disagree, a value out of range
-// (validate()), an effect the live estimator does not run (live_effect_refusal()) and another version.
+// (validate()), an effect the live estimator does not run (`not_live`) and another version.
 void to_json(nlohmann::json& j, const PaperAxisParams& p);
 void from_json(const nlohmann::json& j, PaperAxisParams& p);
 void to_json(nlohmann::json& j, const FullModelParams& p);

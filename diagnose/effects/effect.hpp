@@ -170,6 +170,8 @@ class Effect {
   // parameters. An effect the estimator does not run keeps both defaults: its parameters under
   // "effects.NAME.PARAMETER", and nothing added.
   virtual std::string live_path(const Parameter& p) const { return "effects." + std::string(name()) + "." + p.name; }
+  // Why the live estimator cannot run this effect at all, or nullopt (PARAMS.json's not_live: the file is refused).
+  virtual std::optional<std::string_view> live_refusal() const { return std::nullopt; }
   virtual void to_live(std::span<const double> values, std::span<const Parameter> parameters, const LiveContext&,
                        estimator::FullModelParams& live) const {
     (void)values, (void)parameters, (void)live;

@@ -28,6 +28,11 @@ class Vibration final : public Effect {
  public:
   std::string_view name() const override { return "vibration"; }
   Stages stages() const override { return {.prediction = true}; }
+  std::optional<std::string_view> live_refusal() const override {
+    return "vibration is a sinusoid whose phase belongs to the identified session's clock; live, vibration is "
+           "measurement noise, which the filter's accel_noise takes from the residual RMS: re-run diagnose with "
+           "--lowpass or --ignore-band";
+  }
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     const double nyquist = 0.5 * sample_rate_hz(setup.signals->t);
     std::vector<Parameter> out{{"frequency", "Hz", 0.0, 0.0, nyquist}};

@@ -1,10 +1,11 @@
 // A diagnosed model as the live estimator runs it (diagnose/live_model.hpp): each effect's live form is its own
-// (Effect::live_path, Effect::to_live), and the PARAMS.json reader knows exactly the library's effects.
+// (Effect::live_path, Effect::to_live), and one the live estimator cannot run makes the PARAMS.json refused.
 #include "diagnose/live_model.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -33,11 +34,30 @@ Signals signals_with_yaw(double yaw) {
   return prepare_signals(series);
 }
 
-TEST(LiveModel, TheParamsReaderKnowsExactlyTheLibrarysEffects) {
-  std::vector<std::string_view> library;
-  for (const auto& effect : effect_library()) library.push_back(effect->name());
-  const std::span<const std::string_view> known = estimator::known_effects();
-  EXPECT_EQ(std::vector<std::string_view>(known.begin(), known.end()), library);
+// A model with vibration, which the live estimator cannot run, is written with the reason beside it, and refused
+// with it when run, replay or evaluate read the file; the estimator keeps no list of diagnose's effects.
+TEST(LiveModel, AnEffectTheLiveEstimatorCannotRunIsRefusedWhenTheFileIsRead) {
+  const Signals signals = signals_with_yaw(0.0);
+  ModelSetup setup;
+  setup.signals = &signals;
+  const Effect& vibration = *find_effect("vibration");
+  ASSERT_TRUE(vibration.live_refusal());
+  const Model model(signals, setup, {find_effect("linear_drag"), &vibration});
+  std::vector<double> p(model.parameters().size(), 0.1);
+  const estimator::ModelParams live = live_params(model, p, {});
+  EXPECT_EQ(live.effects, (std::vector<std::string>{"linear_drag", "vibration"}));
+  ASSERT_EQ(live.not_live.size(), 1u);
+  EXPECT_EQ(live.not_live.at("vibration"), *vibration.live_refusal());
+  try {
+    (void)estimator::parse_params(nlohmann::json(live).dump(), "PARAMS.json");
+    ADD_FAILURE() << "a model with vibration was read";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("vibration is measurement noise"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(find_effect("linear_drag")->live_refusal());
+  const Model flyable(signals, setup, {find_effect("linear_drag")});
+  const std::vector<double> q(flyable.parameters().size(), 0.1);
+  EXPECT_TRUE(live_params(flyable, q, {}).not_live.empty());
 }
 
 // Every effect with a live form, fitted to distinct values on the full base: each value lands where that effect's

@@ -274,27 +274,27 @@ TEST(ModelParamsJson, WrongTypesAreRefusedNamingTheKeyAndTheTypeExpected) {
   }
 }
 
-TEST(ModelParamsJson, EffectsMustBeOnesTheLiveEstimatorRuns) {
-  for (const char* effect : {"linear_drag", "quadratic_drag", "wind", "accel_bias", "accel_scale", "accel_cross",
-                             "gyro_bias", "time_offset", "thrust", "lever_arm_z", "self_consistent_velocity"}) {
-    EXPECT_EQ(live_effect_refusal(effect), std::nullopt) << effect;
-    json j = identified();
-    j["effects"] = {effect};
-    EXPECT_EQ(j.get<ModelParams>().effects, std::vector<std::string>{effect});
-  }
+// The effects are what the model was built from, kept as named: what each adds live is in `full`. A model with an
+// effect the live estimator cannot run is refused, with the reason diagnose wrote beside it.
+TEST(ModelParamsJson, AModelWithAnEffectTheLiveEstimatorCannotRunIsRefusedWithItsReason) {
   json j = identified();
+  j["effects"] = {"linear_drag", "an_effect_of_a_later_diagnose"};
+  EXPECT_EQ(j.get<ModelParams>().effects, (std::vector<std::string>{"linear_drag", "an_effect_of_a_later_diagnose"}));
+  j["effects"] = {"linear_drag", 3};
+  EXPECT_NE(read_error(j).find("effects[]: expected an effect name (a string)"), std::string::npos) << read_error(j);
+
   j["effects"] = {"linear_drag", "vibration"};
-  std::string error = read_error(j);
-  EXPECT_NE(error.find("vibration"), std::string::npos) << error;
-  EXPECT_NE(error.find("measurement noise"), std::string::npos) << error;
-  EXPECT_NE(error.find("--lowpass"), std::string::npos) << error;
+  j["not_live"] = {{"vibration", "live, vibration is measurement noise: re-run diagnose with --lowpass"}};
+  const std::string error = read_error(j);
+  EXPECT_NE(error.find("not_live.vibration: the live estimator cannot run it: live, vibration is measurement noise"),
+            std::string::npos)
+      << error;
   EXPECT_EQ(error.find('\n'), std::string::npos) << error;  // one line
-  j["effects"] = {"linear_drag", "qudratic_drag"};
-  error = read_error(j);
-  EXPECT_NE(error.find("unknown effect \"qudratic_drag\""), std::string::npos) << error;
-  EXPECT_NE(error.find("did you mean \"quadratic_drag\""), std::string::npos) << error;
-  j["effects"] = {"turbulence"};
-  EXPECT_NE(read_error(j).find("unknown effect \"turbulence\""), std::string::npos);
+  j["not_live"] = json::object();
+  EXPECT_EQ(j.get<ModelParams>().effects, (std::vector<std::string>{"linear_drag", "vibration"}));
+  j["not_live"] = {{"vibration", 1}};
+  EXPECT_NE(read_error(j).find("not_live.vibration: expected the reason (a string)"), std::string::npos)
+      << read_error(j);
 }
 
 TEST(ModelParamsJson, RefusesEffectParametersOutOfRange) {
