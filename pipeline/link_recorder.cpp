@@ -13,21 +13,6 @@ protocol::DecoderCounters total(const LinkDecoder& decoder) {
   return sum;
 }
 
-// What a decoder counted since `before`: a recording that began after its decoder counts only its own share.
-protocol::DecoderCounters since(const protocol::DecoderCounters& now, const protocol::DecoderCounters& before) {
-  return {.bytes_in = now.bytes_in - before.bytes_in,
-          .frames_out = now.frames_out - before.frames_out,
-          .crc_failures = now.crc_failures - before.crc_failures,
-          .resyncs = now.resyncs - before.resyncs,
-          .bytes_discarded = now.bytes_discarded - before.bytes_discarded,
-          .sequence_gaps = now.sequence_gaps - before.sequence_gaps,
-          .frames_lost = now.frames_lost - before.frames_lost,
-          .duplicates = now.duplicates - before.duplicates,
-          .device_restarts = now.device_restarts - before.device_restarts,
-          .unsupported = now.unsupported - before.unsupported,
-          .unverified = now.unverified - before.unverified};
-}
-
 }  // namespace
 
 LinkRecorder::LinkRecorder(store::Store& store, std::int64_t session, std::int64_t row, std::string name,
@@ -77,7 +62,12 @@ void LinkRecorder::end(const LinkDecoder& decoder, std::int64_t mono_ns, std::in
   record_reference(decoder, mono_ns, true);
   nlohmann::json counters;
   const auto now = decoder.counters();
-  for (std::size_t i = 0; i < now.size(); ++i) counters[now[i].first] = since(now[i].second, counted_before_[i].second);
+  // A recording that began after its decoder counts only its own share.
+  for (std::size_t i = 0; i < now.size(); ++i) {
+    protocol::DecoderCounters own = now[i].second;
+    own -= counted_before_[i].second;
+    counters[now[i].first] = own;
+  }
   counters["frames_without_sample"] = decoder.frames_without_sample() - without_sample_before_;
   store_.append_event(session_, {.link_id = row_,
                                  .mono_ns = mono_ns,

@@ -19,6 +19,21 @@ DecoderCounters& DecoderCounters::operator+=(const DecoderCounters& other) {
   return *this;
 }
 
+DecoderCounters& DecoderCounters::operator-=(const DecoderCounters& earlier) {
+  bytes_in -= earlier.bytes_in;
+  frames_out -= earlier.frames_out;
+  crc_failures -= earlier.crc_failures;
+  resyncs -= earlier.resyncs;
+  bytes_discarded -= earlier.bytes_discarded;
+  sequence_gaps -= earlier.sequence_gaps;
+  frames_lost -= earlier.frames_lost;
+  duplicates -= earlier.duplicates;
+  device_restarts -= earlier.device_restarts;
+  unsupported -= earlier.unsupported;
+  unverified -= earlier.unverified;
+  return *this;
+}
+
 void to_json(nlohmann::json& j, const DecoderCounters& c) {
   j = nlohmann::json{
       {"bytes_in", c.bytes_in},       {"frames_out", c.frames_out},           {"crc_failures", c.crc_failures},

@@ -22,6 +22,8 @@ struct DecoderCounters {
   std::uint64_t unverified = 0;       // candidates that cannot be checked, so no frames (MAVLink: an unknown id)
 
   DecoderCounters& operator+=(const DecoderCounters& other);
+  // What was counted since `earlier`, the same decoder's counts at an earlier time.
+  DecoderCounters& operator-=(const DecoderCounters& earlier);
   friend bool operator==(const DecoderCounters&, const DecoderCounters&) = default;
 };
 

@@ -43,6 +43,19 @@ TEST(DecoderCounters, AddsEveryCounter) {
                                   .unverified = 20}));
 }
 
+// What a decoder counted since an earlier reading of its counts: every counter, each its own.
+TEST(DecoderCounters, SubtractsAnEarlierReadingFromEveryCounter) {
+  DecoderCounters now = kSome;
+  now += kSome;
+  now += kSome;
+  now -= kSome;
+  DecoderCounters twice = kSome;
+  twice += kSome;
+  EXPECT_EQ(now, twice);
+  now -= twice;
+  EXPECT_EQ(now, DecoderCounters{});
+}
+
 TEST(IsRestart, NeedsTheClockBackAndNotTheNextNumber) {
   EXPECT_TRUE(is_restart<std::uint16_t>(5000, 0, 5'000'000, 1'000));        // numbered and timed from zero again
   EXPECT_TRUE(is_restart<std::uint16_t>(3, 0, 9'000'000, 0));               // even when the counter had wrapped
