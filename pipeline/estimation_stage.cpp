@@ -41,8 +41,9 @@ EstimationStage::LinkState& EstimationStage::link(const protocol::SourceKey& sou
   return links_.emplace(source, std::move(state)).first->second;
 }
 
-void EstimationStage::resolve(const protocol::SourceKey& source, LinkState& link) {
-  const estimator::AxesResolution resolution = estimator::resolve_axes(link.declared, link.detector->result());
+void EstimationStage::resolve(const protocol::SourceKey& source, LinkState& link,
+                              const std::optional<estimator::AxesDetection>& detection) {
+  const estimator::AxesResolution resolution = estimator::resolve_axes(link.declared, detection);
   link.detector.reset();
   link.imu_to_body = resolution.axes.imu_to_body;
   link.rotate = !estimator::is_identity(resolution.axes);
@@ -60,17 +61,21 @@ void EstimationStage::update(const protocol::Sample& sample, std::vector<store::
     if (state.declared.automatic) {
       state.waiting.push_back(sample);
       if (!decided) return;
-      resolve(sample.source, state);
-      std::vector<protocol::Sample> waiting = std::move(state.waiting);
-      state.waiting = {};
-      for (const protocol::Sample& s : waiting) {
-        if (auto e = estimate(state, s)) out.push_back(*e);
-      }
+      resolve(sample.source, state, state.detector->result());
+      release_waiting(state, out);
       return;
     }
-    if (decided) resolve(sample.source, state);
+    if (decided) resolve(sample.source, state, state.detector->result());
   }
   if (auto e = estimate(state, sample)) out.push_back(*e);
+}
+
+void EstimationStage::release_waiting(LinkState& link, std::vector<store::Estimate>& out) {
+  std::vector<protocol::Sample> waiting = std::move(link.waiting);
+  link.waiting = {};
+  for (const protocol::Sample& s : waiting) {
+    if (auto e = estimate(link, s)) out.push_back(*e);
+  }
 }
 
 std::optional<store::Estimate> EstimationStage::update(const protocol::Sample& sample) {
@@ -93,9 +98,9 @@ void EstimationStage::finish(const Released& released) {
   std::vector<store::Estimate> out;
   for (auto& [source, state] : links_) {
     if (!state.detector) continue;
+    std::optional<estimator::AxesDetection> detection = state.detector->result();
     if (!state.detector->decided()) {
       // Decide on the mean specific force of what came: the detector's own flight rule, applied early.
-      std::optional<estimator::AxesDetection> detection;
       std::vector<double> t;
       std::vector<Eigen::Vector3d> accel, gyro;
       for (const protocol::Sample& s : state.waiting) {
@@ -106,20 +111,10 @@ void EstimationStage::finish(const Released& released) {
         gyro.push_back(w);
       }
       detection = estimator::detect_up(t, accel, gyro);
-      const estimator::AxesResolution resolution = estimator::resolve_axes(state.declared, detection);
-      state.detector.reset();
-      state.imu_to_body = resolution.axes.imu_to_body;
-      state.rotate = !estimator::is_identity(resolution.axes);
-      if (axes_->on_resolved) axes_->on_resolved(source, resolution);
-    } else {
-      resolve(source, state);
     }
-    std::vector<protocol::Sample> waiting = std::move(state.waiting);
-    state.waiting = {};
+    resolve(source, state, detection);
     out.clear();
-    for (const protocol::Sample& s : waiting) {
-      if (auto e = estimate(state, s)) out.push_back(*e);
-    }
+    release_waiting(state, out);
     if (!out.empty()) released(source, out);
   }
 }

@@ -75,7 +75,11 @@ class EstimationStage {
   };
 
   LinkState& link(const protocol::SourceKey& source);
-  void resolve(const protocol::SourceKey& source, LinkState& link);
+  // The source's axes from `detection` (and its declaration): the detector is done, and on_resolved hears it.
+  void resolve(const protocol::SourceKey& source, LinkState& link,
+               const std::optional<estimator::AxesDetection>& detection);
+  // An auto source's samples held until its axes were decided, estimated now into `out`.
+  void release_waiting(LinkState& link, std::vector<store::Estimate>& out);
   std::optional<store::Estimate> estimate(LinkState& link, const protocol::Sample& sample);
 
   estimator::ModelParams params_;
