@@ -113,7 +113,6 @@ estimator::IdentifyResult identify_by_filter_error(const estimator::ImuSeries& s
   record_fit(result.params, model, fit.values, train, validation);
   result.params.identification.method = "filter-error";
   result.params.effects.clear();  // identify's blocks, not effects a diagnosis added
-  result.params.conditions_flight = estimator::flight_identity(series);
 
   // identify names each parameter by its PARAMS.json path; the filter's process noise, which has none, by its own.
   std::vector<std::string> paths = parameter_paths(model);

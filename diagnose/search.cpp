@@ -878,7 +878,6 @@ void name_velocity_ramps(const Search& search, const State& current, Diagnosis& 
 void describe_final(const Search& search, const State& current, Diagnosis& out) {
   out.final = current.summary;
   out.final_params = current.params;
-  out.final_params.conditions_flight = estimator::flight_identity(search.series);
   out.final_residual = out.steps.empty() ? out.base_residual : out.steps.back().residual;
   out.residual_white = std::all_of(out.final_residual.begin(), out.final_residual.end(),
                                    [](const ResidualAnalysis& a) { return a.white; });

@@ -38,7 +38,8 @@ std::optional<std::string> validate(const ImuSeries& series);
 void require_valid(const ImuSeries& series);
 
 // What names one flight wherever its samples are (a store, a synced copy, a replay): a hash of its first samples' times
-// and readings, "imu:" and 16 hex digits. PARAMS.json records it beside the conditions fitted on that flight
+// and readings as stored (replay::SessionSeries::flight hashes them before any cut or rotation), "imu:" and 16 hex
+// digits. PARAMS.json records it beside the conditions fitted on that flight
 // (params.hpp), so that no other flight is estimated with them.
 std::string flight_identity(const ImuSeries& series);
 

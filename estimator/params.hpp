@@ -58,8 +58,10 @@ struct ModelParams {
   PaperAxisParams paper_x;  // pitch: the paper's x-axis model
   PaperAxisParams paper_y;  // roll: the same model about x_b (paper_model.hpp has the sign mapping)
   FullModelParams full;
-  // The flight the conditions in `full` were fitted on (estimator::flight_identity); empty: not recorded (a file
-  // written before conditions were kept apart, or edited by hand), and they are then taken as they are.
+  // The flight the conditions in `full` were fitted on (estimator::flight_identity of its samples as stored: set by
+  // whoever read the flight, replay::SessionSeries::flight; a fit sees a series already cut and turned, so it cannot);
+  // empty: not recorded (a file written before conditions were kept apart, by hand, or by a fit no store fed), and
+  // they are then taken as they are.
   std::string conditions_flight;
   // Flown on a flight other than conditions_flight (for_flight): that flight's accelerometer offset is unknown, and the
   // filter says so in its variance (config_for, kTransferredOffsetStd). Written with the run's parameters, so a replay

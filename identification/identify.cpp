@@ -390,7 +390,6 @@ IdentifyResult identify(const ImuSeries& series, const IdentifyOptions& o) {
     const auto samples = prepare_full(series, o.velocity, o.derivative_half_window);
     result.fits.push_back(identify_full(samples, windows, o, result.params.full, id));
   }
-  result.params.conditions_flight = flight_identity(series);
   return result;
 }
 
