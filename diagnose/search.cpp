@@ -424,7 +424,8 @@ void judge(const Search& search, const Model& model, State& state, const State* 
     state.summary.velocity = flown_as->summary.velocity;
     state.summary.likelihood = flown_as->summary.likelihood;
   } else {
-    state.summary.velocity = estimator::score_velocity(search.series, state.params, search.windows);
+    state.summary.velocity = estimator::score_velocity(search.series, state.params, search.windows,
+                                                       search.options.validation_on_other_flights);
     // The filter's likelihood judges what the filter error method fitted (its process noise with the model). Eq. (12)'s
     // fit tunes no filter: the likelihood of its models would be that of a filter at its default noise, judging a
     // model fitted to another velocity (it refused eq. (12)'s true linear drag on seed 9 of effects-sweep).

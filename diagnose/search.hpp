@@ -63,6 +63,9 @@ struct DiagnoseOptions {
   // step that only makes the velocity self-consistent) is not refused for it, and the residual chooses between them.
   double flight_tolerance = 0.01;
   std::string session;  // how the report names the data
+  // The validation window holds other flights than the training window (a flight set's validating flights): their
+  // velocity is scored as the model flies on a new flight, its offset unknown (estimator::score_velocity).
+  bool validation_on_other_flights = false;
   // A candidate whose fitted values exceed these is refused, whatever its gain.
   estimator::PlausibilityLimits limits;
   // Called as the search moves, from the fitting threads (so it must be thread-safe); may be empty.

@@ -46,9 +46,17 @@ VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector
 }
 
 std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
-                                             const Windows& windows) {
+                                             const Windows& windows, bool validation_on_other_flights) {
   if (!series.reference) return std::nullopt;
   try {
+    if (validation_on_other_flights) {
+      ModelParams elsewhere = params;
+      elsewhere.transferred = true;
+      const VelocityError train = evaluate_velocity(series, params.full, windows.train, config_for(params)).estimator;
+      const VelocityError validation =
+          evaluate_velocity(series, params.full, windows.validate, config_for(elsewhere)).estimator;
+      return VelocityScores{train, validation, ""};
+    }
     const TimeWindow both[] = {windows.train, windows.validate};
     const std::vector<VelocityEvaluation> e = evaluate_velocity(series, params.full, both, config_for(params));
     return VelocityScores{e[0].estimator, e[1].estimator, ""};

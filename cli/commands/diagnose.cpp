@@ -277,6 +277,7 @@ DiagnosedData read_data(const store::Store& store, const DiagnoseCliOptions& o,
     data.joined = join(*data.flights, *options.velocity == dg::VelocitySource::filter);
     options.train = data.joined->train;
     options.validate = data.joined->validate;
+    options.validation_on_other_flights = true;
     options.session = o.db + "#" + o.sessions + (o.validate_sessions ? "/" + *o.validate_sessions : "");
   } else {
     data.session = replay::read_session_series(store, fit_ids.front(), reading);

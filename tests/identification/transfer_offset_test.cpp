@@ -2,6 +2,8 @@
 // it (estimator::measure_transfer_offset): what makes the live filter's variance honest there, kept in PARAMS.json.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -67,6 +69,26 @@ TEST(TransferOffset, AFitFromTheImuAloneDidNotPlaceTheOffsetEvenOnItsOwnFlight) 
   params.identification.process_noise = 0.8;            // the filter error method: fitted from the IMU alone
   EXPECT_EQ(config_for(params).accel_offset_std, kTransferredOffsetStd);
   EXPECT_EQ(config_for(params).wind_std, 0.0);  // the flight's own wind is in what the drag reads, as in the fit
+}
+
+// diagnose judges a step on a flight set by its validating flights: other flights, which the calibration flies as
+// any new one (transferred: their offset unknown, weighed towards rest), not as the flight it was fitted on.
+TEST(TransferOffset, AFlightSetsValidatingFlightsAreScoredAsTheCalibrationFliesThere) {
+  const ModelParams params = calibration();
+  const ImuSeries other = paper_flight(4, {"accel_bias=0.4,-0.3,0"});
+  const Windows windows{TimeWindow{5.0, 25.0}, TimeWindow{25.0, 50.0}};
+  ModelParams elsewhere = params;
+  elsewhere.transferred = true;
+  const double flown = evaluate_velocity(other, params.full, windows.validate, config_for(elsewhere)).estimator.horizontal;
+  const double as_fitted = evaluate_velocity(other, params.full, windows.validate, config_for(params)).estimator.horizontal;
+  ASSERT_GT(std::abs(flown - as_fitted), 1e-3);  // the two differ on this flight: the test can tell them apart
+
+  const std::optional<VelocityScores> set = score_velocity(other, params, windows, true);
+  const std::optional<VelocityScores> own = score_velocity(other, params, windows, false);
+  ASSERT_TRUE(set && own);
+  EXPECT_DOUBLE_EQ(set->validation.horizontal, flown);
+  EXPECT_DOUBLE_EQ(own->validation.horizontal, as_fitted);
+  EXPECT_DOUBLE_EQ(set->train.horizontal, own->train.horizontal);  // the fitting flights are the calibration's own
 }
 
 TEST(TransferOffset, RefusesFlightsItCannotScore) {
