@@ -12,6 +12,18 @@
 namespace imubridge::estimator {
 namespace {
 
+// The velocity error an unknown accelerometer offset of std `offset_std` gives at the estimate v: what a force that
+// far either side reads as through the drag law's inverse (RMS of the two). For a linear law that is offset_std / k,
+// computed so. For a quadratic one the tangent at v claims far less near rest, where the inverse is steep: a
+// one-sigma offset read at rest makes v = sqrt(offset / mu), and offset / slope(v) is half of that.
+double offset_velocity(double k, double mu, double v, double offset_std) {
+  if (mu == 0.0 || offset_std == 0.0) return offset_std / std::max(drag_slope(k, mu, v), 1e-9);
+  const double f = drag_specific_force(k, mu, v);
+  const double up = invert_drag(k, mu, f - offset_std) - v;  // the law opposes motion: less force, more speed
+  const double down = v - invert_drag(k, mu, f + offset_std);
+  return std::sqrt(0.5 * (up * up + down * down));
+}
+
 // Keeps gamma_z = sqrt(1 - gamma_x^2 - gamma_y^2) away from zero, where the Jacobian divides by it. A quadrotor
 // tilted beyond ~84 degrees is not flying the regime this filter models anyway.
 constexpr double kMinGammaZ = 0.1;
@@ -210,9 +222,9 @@ void DragVelocityEstimator::fuse_axis(int axis, const WindLinearisation& w, Drag
 void DragVelocityEstimator::weigh_against_rest(int axis, DragVelocityEstimate& out) const {
   const double k = params_.drag_linear[axis];
   const double mu = params_.drag_quadratic[axis];
-  // The filter's velocity carries, beside its own variance, the offset's: offset / slope, constant through the
+  // The filter's velocity carries, beside its own variance, the offset's (offset_velocity), constant through the
   // flight. Weighed against rest (a Gaussian prior of std rest_speed_std), the product of the two is the output.
-  const double offset = config_.accel_offset_std / std::max(drag_slope(k, mu, x_[axis]), 1e-9);
+  const double offset = offset_velocity(k, mu, x_[axis], config_.accel_offset_std);
   const double known = p_(axis, axis) + offset * offset + config_.wind_std * config_.wind_std;
   const double rest = config_.rest_speed_std * config_.rest_speed_std;
   out.v[axis] = x_[axis] * rest / (rest + known);

@@ -299,6 +299,29 @@ TEST(DragVelocityEstimator, WhereTheDragIsTooWeakToReadItRelaxesTowardsRestInste
   EXPECT_GT(std::sqrt(honest.v_var.x()), 3.0);                     // it says how little it knows
 }
 
+TEST(DragVelocityEstimator, AnOffsetReadThroughAQuadraticLawNearRestIsCountedAsTheInverseReadsIt) {
+  // A vehicle at rest, level, with the paper's pure quadratic drag, whose accelerometer reads a zero-g offset of one
+  // standard deviation (kTransferredOffsetStd) no fit of this flight placed. The law's inverse reads it as
+  // sqrt(offset / mu) = 3.8 m/s; the tangent at that speed, offset / (2 mu v), would count half of it, and the
+  // variance would claim a 1-sigma error as nearly 2 sigma (normalised error squared 3.5, not about 1).
+  FullModelParams quadratic;
+  quadratic.drag_quadratic = {0.04, 0.04};
+  DragVelocityConfig told;
+  told.accel_offset_std = kTransferredOffsetStd;
+  const DragVelocityEstimate e =
+      steady_level_estimate(quadratic, told, Eigen::Vector3d(kTransferredOffsetStd, 0.0, -kGravity));
+  EXPECT_LT(e.v.x(), -1.0);  // the offset still reads as a speed, weighed towards rest
+  const double nees = e.v.x() * e.v.x() / e.v_var.x();
+  EXPECT_GT(nees, 0.5);
+  EXPECT_LT(nees, 2.0);
+  // A linear law's inverse is its tangent: the same weighing as before, offset / k.
+  FullModelParams linear;
+  linear.drag_linear = {0.3, 0.3};
+  const DragVelocityEstimate l =
+      steady_level_estimate(linear, told, Eigen::Vector3d(kTransferredOffsetStd, 0.0, -kGravity));
+  EXPECT_LT(l.v.x() * l.v.x() / l.v_var.x(), 2.0);
+}
+
 TEST(DragVelocityEstimator, OnAnotherFlightTheUnknownWindWeighsTheVelocityTowardsRest) {
   // A steady 4 m/s through the air, read by a strong drag (k = 0.5 1/s: the accelerometer's offset is a small share).
   // Over the ground the vehicle flies 4 m/s plus a wind that a calibration from another flight does not know.
