@@ -36,8 +36,9 @@ TEST(TransferOffset, GrowsWithTheOffsetsTheValidatingFlightsCarry) {
   const ModelParams params = calibration();
   const std::vector<TimeWindow> windows(2, TimeWindow{5.0, 50.0});
   const std::vector<ImuSeries> alike{paper_flight(4), paper_flight(5)};
-  const std::vector<ImuSeries> restrapped{paper_flight(4, {"accel_bias=0.4,-0.3,0"}),
-                                          paper_flight(5, {"accel_bias=-0.4,0.3,0"})};
+  // Offsets of 1.5 m/s^2, beyond the datasheet default the filter counts without a measurement (0.59 m/s^2).
+  const std::vector<ImuSeries> restrapped{paper_flight(4, {"accel_bias=1.2,-0.9,0"}),
+                                          paper_flight(5, {"accel_bias=-1.2,0.9,0"})};
   const TransferOffset same = measure_transfer_offset(alike, windows, params);
   const TransferOffset moved = measure_transfer_offset(restrapped, windows, params);
   EXPECT_EQ(moved.flights, 2u);
