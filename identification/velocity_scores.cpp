@@ -45,8 +45,8 @@ VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector
   return {zero_error(series, v, windows.train), zero_error(series, v, windows.validate), ""};
 }
 
-std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
-                                             const Windows& windows, bool validation_on_other_flights) {
+std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params, const Windows& windows,
+                                             bool validation_on_other_flights) {
   if (!series.reference) return std::nullopt;
   try {
     if (validation_on_other_flights) {

@@ -24,8 +24,8 @@ struct VelocityScores {
 // Nothing without a reference. The filter's settings follow the parameters (config_for), as in run and replay.
 // `validation_on_other_flights`: the validation window holds flights the model was not fitted on (a flight set's
 // validating flights), which it flies as any new flight, transferred: their offset unknown (config_for).
-std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params,
-                                             const Windows& windows, bool validation_on_other_flights = false);
+std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params, const Windows& windows,
+                                             bool validation_on_other_flights = false);
 
 // How well the drag-velocity filter run with a model predicts the accelerometer: the mean, over the samples of a
 // window and both horizontal axes, of the Gaussian log-density of each innovation under the variance the filter gives

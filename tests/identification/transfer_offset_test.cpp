@@ -80,8 +80,10 @@ TEST(TransferOffset, AFlightSetsValidatingFlightsAreScoredAsTheCalibrationFliesT
   const Windows windows{TimeWindow{5.0, 25.0}, TimeWindow{25.0, 50.0}};
   ModelParams elsewhere = params;
   elsewhere.transferred = true;
-  const double flown = evaluate_velocity(other, params.full, windows.validate, config_for(elsewhere)).estimator.horizontal;
-  const double as_fitted = evaluate_velocity(other, params.full, windows.validate, config_for(params)).estimator.horizontal;
+  const double flown =
+      evaluate_velocity(other, params.full, windows.validate, config_for(elsewhere)).estimator.horizontal;
+  const double as_fitted =
+      evaluate_velocity(other, params.full, windows.validate, config_for(params)).estimator.horizontal;
   ASSERT_GT(std::abs(flown - as_fitted), 1e-3);  // the two differ on this flight: the test can tell them apart
 
   const std::optional<VelocityScores> set = score_velocity(other, params, windows, true);
