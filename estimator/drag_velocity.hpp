@@ -29,9 +29,10 @@ struct DragVelocityConfig {
   double initial_tilt_std = 0.1;        // of the body x, y components of the gravity direction (~rad)
   double initial_gyro_bias_std = 0.02;  // rad/s
   // Never inventing a speed (docs/estimator.md, "Honest variance, and rest"). A constant offset of the horizontal
-  // specific force (the accelerometer's zero-g offset on a flight the calibration was not fitted on) reads as a
-  // velocity offset / slope that no run of white noise averages away; its std. 0 on the flight the model was fitted
-  // on, where the fit placed the offset; config_for sets kTransferredOffsetStd on any other.
+  // specific force (the accelerometer's zero-g offset on a flight the calibration was not fitted on) reads through the
+  // drag law's inverse as a velocity offset (offset / k for a linear law) that no run of white noise averages away;
+  // its std. 0 on the flight the model was fitted on, where the fit placed the offset; config_for sets
+  // kTransferredOffsetStd on any other.
   double accel_offset_std = 0.0;  // m/s^2
   // The drag gives the velocity through the air; the vehicle's over the ground differs by the wind, which no IMU sees
   // on a steady heading. On the flight the model was fitted on, its wind went into the fit; on any other the two

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "tests/support/cli_run_harness.hpp"
+#include "tests/support/json_numbers.hpp"
 #include "tests/support/loopback_port.hpp"
 #include "tests/support/npm_packages.hpp"
 
@@ -28,7 +29,6 @@ namespace {
 using nlohmann::json;
 
 // A number of a message equal to the stored double: JSON has no NaN, so the message says null.
-bool same(const json& j, double v) { return std::isnan(v) ? j.is_null() : (j.is_number() && j.get<double>() == v); }
 
 // `node tests/foxglove_client.cjs URL` as a child process; what it prints (one JSON object per line) goes to a file,
 // read here as it grows.
@@ -128,16 +128,16 @@ void expect_samples_as_stored(const std::vector<json>& samples, const std::vecto
     EXPECT_EQ(m.at("timestamp").get<double>(), static_cast<double>(s.device_time_us) / 1e6);
     for (std::size_t axis = 0; axis < 3; ++axis) {
       const char* name = std::array{"x", "y", "z"}[axis];
-      EXPECT_TRUE(same(m.at("accel").at(name), s.accel[axis])) << m;
-      EXPECT_TRUE(same(m.at("gyro").at(name), s.gyro[axis])) << m;
+      EXPECT_TRUE(json_holds(m.at("accel").at(name), s.accel[axis])) << m;
+      EXPECT_TRUE(json_holds(m.at("gyro").at(name), s.gyro[axis])) << m;
       if (s.has_mag) {
-        EXPECT_TRUE(same(m.at("mag").at(name), s.mag[axis])) << m;
+        EXPECT_TRUE(json_holds(m.at("mag").at(name), s.mag[axis])) << m;
       }
     }
     EXPECT_EQ(m.contains("mag"), s.has_mag);
     EXPECT_EQ(m.contains("temperature"), s.has_temperature);
     if (s.has_temperature) {
-      EXPECT_TRUE(same(m.at("temperature"), s.temperature_c)) << m;
+      EXPECT_TRUE(json_holds(m.at("temperature"), s.temperature_c)) << m;
     }
     EXPECT_EQ(m.at("receiveTime").get<std::int64_t>(), m.at("recv_wall_ns").get<std::int64_t>());
   }
@@ -149,12 +149,12 @@ void expect_estimates_as_stored(const std::vector<json>& messages, const std::ve
   for (std::size_t i = 0; i < messages.size(); ++i) {
     const json& e = messages[i].at("estimate");
     ASSERT_EQ(e.at("seq").get<std::uint64_t>(), estimates[i].seq);
-    EXPECT_TRUE(same(e.at("fx"), estimates[i].fx)) << e;
-    EXPECT_TRUE(same(e.at("fy"), estimates[i].fy)) << e;
-    EXPECT_TRUE(same(e.at("vx"), estimates[i].vx)) << e;
-    EXPECT_TRUE(same(e.at("vy"), estimates[i].vy)) << e;
-    EXPECT_TRUE(same(e.at("sx"), std::sqrt(estimates[i].var_vx))) << e;
-    EXPECT_TRUE(same(e.at("sy"), std::sqrt(estimates[i].var_vy))) << e;
+    EXPECT_TRUE(json_holds(e.at("fx"), estimates[i].fx)) << e;
+    EXPECT_TRUE(json_holds(e.at("fy"), estimates[i].fy)) << e;
+    EXPECT_TRUE(json_holds(e.at("vx"), estimates[i].vx)) << e;
+    EXPECT_TRUE(json_holds(e.at("vy"), estimates[i].vy)) << e;
+    EXPECT_TRUE(json_holds(e.at("sx"), std::sqrt(estimates[i].var_vx))) << e;
+    EXPECT_TRUE(json_holds(e.at("sy"), std::sqrt(estimates[i].var_vy))) << e;
     EXPECT_EQ(messages[i].at("receiveTime").get<std::int64_t>(), messages[i].at("recv_wall_ns").get<std::int64_t>());
   }
 }

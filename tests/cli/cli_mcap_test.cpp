@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "store/store.hpp"
+#include "tests/support/json_numbers.hpp"
 #include "tests/support/npm_packages.hpp"
 #include "tests/support/paper_params.hpp"
 #include "tests/support/run_command.hpp"
@@ -37,8 +38,6 @@ json read_with_mcap_core(const fs::path& file) {
   }
   return read;
 }
-
-bool same(const json& j, double v) { return std::isnan(v) ? j.is_null() : (j.is_number() && j.get<double>() == v); }
 
 class McapExport : public ::testing::Test {
  protected:
@@ -134,8 +133,8 @@ void expect_samples_equal(const json& sample_messages, const std::vector<protoco
     ASSERT_EQ(d["recv_mono_ns"], s.recv_mono_ns);
     const char* axes[] = {"ax", "ay", "az", "gx", "gy", "gz"};
     for (int k = 0; k < 3; ++k) {
-      ASSERT_TRUE(same(d[axes[k]], s.accel[k])) << i << axes[k];
-      ASSERT_TRUE(same(d[axes[3 + k]], s.gyro[k])) << i << axes[3 + k];
+      ASSERT_TRUE(json_holds(d[axes[k]], s.accel[k])) << i << axes[k];
+      ASSERT_TRUE(json_holds(d[axes[3 + k]], s.gyro[k])) << i << axes[3 + k];
     }
     ASSERT_TRUE(d["mx"].is_null() == !s.has_mag);
   }
@@ -148,10 +147,10 @@ void expect_estimates_equal(const json& estimate_messages, const StoredSession& 
     const auto& e = stored.estimates[i];
     const json& d = estimate_messages[i]["data"];
     ASSERT_EQ(d["seq"], e.seq) << i;
-    ASSERT_TRUE(same(d["device_t_s"], e.t_s)) << i;
-    ASSERT_TRUE(same(d["fx"], e.fx) && same(d["fy"], e.fy)) << i;
-    ASSERT_TRUE(same(d["vx"], e.vx) && same(d["vy"], e.vy)) << i;
-    ASSERT_TRUE(same(d["var_vx"], e.var_vx) && same(d["var_vy"], e.var_vy)) << i;
+    ASSERT_TRUE(json_holds(d["device_t_s"], e.t_s)) << i;
+    ASSERT_TRUE(json_holds(d["fx"], e.fx) && json_holds(d["fy"], e.fy)) << i;
+    ASSERT_TRUE(json_holds(d["vx"], e.vx) && json_holds(d["vy"], e.vy)) << i;
+    ASSERT_TRUE(json_holds(d["var_vx"], e.var_vx) && json_holds(d["var_vy"], e.var_vy)) << i;
     // An estimate has its sample's session time.
     const double sample_t = (static_cast<double>(std::llround(e.t_s * 1e6)) - first_device_us) / 1e6;
     ASSERT_EQ(d["session_t_s"].get<double>(), sample_t) << i;
@@ -168,10 +167,13 @@ void expect_reference_equal(const json& topics, const StoredSession& stored) {
     ASSERT_EQ(poses[i]["log_time"], std::to_string(row.t_ns)) << i;
     ASSERT_EQ(poses[i]["data"]["timestamp"]["sec"], row.t_ns / 1'000'000'000) << i;
     ASSERT_EQ(poses[i]["data"]["timestamp"]["nsec"], row.t_ns % 1'000'000'000) << i;
-    ASSERT_TRUE(same(pose["position"]["x"], row.position[0]) && same(pose["position"]["z"], row.position[2])) << i;
-    ASSERT_TRUE(same(pose["orientation"]["w"], row.quat_wxyz[0]) && same(pose["orientation"]["x"], row.quat_wxyz[1]))
+    ASSERT_TRUE(json_holds(pose["position"]["x"], row.position[0]) &&
+                json_holds(pose["position"]["z"], row.position[2]))
         << i;
-    ASSERT_TRUE(same(velocities[i]["data"]["vx"], (*row.velocity)[0])) << i;
+    ASSERT_TRUE(json_holds(pose["orientation"]["w"], row.quat_wxyz[0]) &&
+                json_holds(pose["orientation"]["x"], row.quat_wxyz[1]))
+        << i;
+    ASSERT_TRUE(json_holds(velocities[i]["data"]["vx"], (*row.velocity)[0])) << i;
     ASSERT_EQ(velocities[i]["data"]["session_t_s"].get<double>(), static_cast<double>(row.t_ns - origin) / 1e9);
   }
 }
