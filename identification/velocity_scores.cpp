@@ -50,11 +50,14 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
   if (!series.reference) return std::nullopt;
   try {
     if (validation_on_other_flights) {
-      ModelParams elsewhere = params;
-      elsewhere.transferred = true;
+      // Flown there as on any flight it was not fitted on (for_flight): its conditions (wind, biases) left behind
+      // and `transferred`, whatever name the fitting flights' conditions carry yet.
+      ModelParams fitted = params;
+      if (fitted.conditions_flight.empty()) fitted.conditions_flight = "the fitting flights";
+      const ModelParams elsewhere = for_flight(fitted, "a validating flight");
       const VelocityError train = evaluate_velocity(series, params.full, windows.train, config_for(params)).estimator;
       const VelocityError validation =
-          evaluate_velocity(series, params.full, windows.validate, config_for(elsewhere)).estimator;
+          evaluate_velocity(series, elsewhere.full, windows.validate, config_for(elsewhere)).estimator;
       return VelocityScores{train, validation, ""};
     }
     const TimeWindow both[] = {windows.train, windows.validate};

@@ -75,13 +75,15 @@ TEST(TransferOffset, AFitFromTheImuAloneDidNotPlaceTheOffsetEvenOnItsOwnFlight) 
 // diagnose judges a step on a flight set by its validating flights: other flights, which the calibration flies as
 // any new one (transferred: their offset unknown, weighed towards rest), not as the flight it was fitted on.
 TEST(TransferOffset, AFlightSetsValidatingFlightsAreScoredAsTheCalibrationFliesThere) {
-  const ModelParams params = calibration();
+  ModelParams params = calibration();
+  params.full.accel_bias = {0.3, -0.2, 0.0};  // a condition of the fitting flights, which stays with them
   const ImuSeries other = paper_flight(4, {"accel_bias=0.4,-0.3,0"});
   const Windows windows{TimeWindow{5.0, 25.0}, TimeWindow{25.0, 50.0}};
   ModelParams elsewhere = params;
+  elsewhere.full.accel_bias.setZero();
   elsewhere.transferred = true;
   const double flown =
-      evaluate_velocity(other, params.full, windows.validate, config_for(elsewhere)).estimator.horizontal;
+      evaluate_velocity(other, elsewhere.full, windows.validate, config_for(elsewhere)).estimator.horizontal;
   const double as_fitted =
       evaluate_velocity(other, params.full, windows.validate, config_for(params)).estimator.horizontal;
   ASSERT_GT(std::abs(flown - as_fitted), 1e-3);  // the two differ on this flight: the test can tell them apart
