@@ -298,15 +298,20 @@ std::string describe_conditions(const FullModelParams& p) {
   return out;
 }
 
-ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left) {
-  if (params.conditions_flight.empty() || params.conditions_flight == flight) return params;
+ModelParams on_another_flight(const ModelParams& params) {
   ModelParams out = params;
   out.transferred = true;
-  const std::string conditions = describe_conditions(params.full);
   out.full.wind.setZero();
   out.full.wind_heading = 0.0;
   out.full.accel_bias.setZero();
   out.full.gyro_bias.setZero();
+  return out;
+}
+
+ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left) {
+  if (params.conditions_flight.empty() || params.conditions_flight == flight) return params;
+  const ModelParams out = on_another_flight(params);
+  const std::string conditions = describe_conditions(params.full);
   if (left != nullptr && !conditions.empty()) {
     *left = "the conditions of the flight these parameters were fitted on (" + params.conditions_flight + ": " +
             conditions + ") are left behind; this flight starts from the vehicle's calibration alone";

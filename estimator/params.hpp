@@ -87,6 +87,9 @@ std::string describe_conditions(const FullModelParams& params);
 // (when given) says which conditions were left behind. A calibration from Monday does not fly Tuesday with Monday's
 // wind.
 ModelParams for_flight(const ModelParams& params, std::string_view flight, std::string* left = nullptr);
+// The parameters as they fly any flight they were not fitted on, whatever flight their conditions name (or none,
+// for a fit still under way): the vehicle's calibration alone, `transferred`. for_flight's other flight.
+ModelParams on_another_flight(const ModelParams& params);
 
 // Reading is strict. It fills missing keys with the defaults (so files written before a key existed still read)
 // and takes radians or degrees when only one is given. It throws std::invalid_argument, naming the key's path

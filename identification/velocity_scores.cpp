@@ -50,11 +50,8 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
   if (!series.reference) return std::nullopt;
   try {
     if (validation_on_other_flights) {
-      // Flown there as on any flight it was not fitted on (for_flight): its conditions (wind, biases) left behind
-      // and `transferred`, whatever name the fitting flights' conditions carry yet.
-      ModelParams fitted = params;
-      if (fitted.conditions_flight.empty()) fitted.conditions_flight = "the fitting flights";
-      const ModelParams elsewhere = for_flight(fitted, "a validating flight");
+      // Flown there as on any flight it was not fitted on: its conditions (wind, biases) left behind, `transferred`.
+      const ModelParams elsewhere = on_another_flight(params);
       const VelocityError train = evaluate_velocity(series, params.full, windows.train, config_for(params)).estimator;
       const VelocityError validation =
           evaluate_velocity(series, elsewhere.full, windows.validate, config_for(elsewhere)).estimator;
@@ -206,17 +203,16 @@ TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::
   if (flights.empty() || flights.size() != windows.size())
     throw std::invalid_argument("measuring the transferred offset needs flights, each with its window");
   TransferOffset out;
-  // Each flight as a new one: its own identity differs from the calibration's, so its conditions stay behind.
-  std::vector<ModelParams> flown;
-  for (const ImuSeries& f : flights) flown.push_back(for_flight(params, flight_identity(f) + "/transfer"));
+  // Each flight as a new one: the calibration's conditions stay behind.
+  const ModelParams flown = on_another_flight(params);
   const auto nees = [&](double offset_std) {
     double sum = 0.0;
     std::size_t samples = 0;
     for (std::size_t i = 0; i < flights.size(); ++i) {
-      DragVelocityConfig config = config_for(flown[i]);
+      DragVelocityConfig config = config_for(flown);
       config.accel_offset_std = offset_std;
       config.wind_std = 0.0;  // the std measured here is the whole of what a new flight carries, its wind included
-      const VelocityEvaluation e = evaluate_velocity(flights[i], flown[i].full, windows[i], config);
+      const VelocityEvaluation e = evaluate_velocity(flights[i], flown.full, windows[i], config);
       sum += e.nees * static_cast<double>(e.samples);
       samples += e.samples;
     }
