@@ -202,8 +202,14 @@ void DragVelocityEstimator::fuse_axis(int axis, const WindLinearisation& w, Drag
   out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
   const double prior_slope = fusion_slope(axis, out.prior_air_velocity[axis]);
   out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
-  if (!has_drag(axis)) {  // not identified yet: the force is still compensated, the velocity is unknown
-    out.v_raw[axis] = out.v_raw_var[axis] = out.v[axis] = out.v_var[axis] = kNaN;
+  if (!has_drag(axis)) {
+    // Nothing reads this axis's velocity. A model with drag on the other axis is a velocity estimator that knows
+    // nothing here: rest, as sure as the prior (weigh_against_rest as k -> 0), never a speed nobody measured. With
+    // drag on neither axis nothing is identified yet: unknown.
+    const bool estimating = has_drag(1 - axis);
+    const double rest = config_.rest_speed_std * config_.rest_speed_std;
+    out.v_raw[axis] = out.v[axis] = estimating ? 0.0 : kNaN;
+    out.v_raw_var[axis] = out.v_var[axis] = estimating ? rest : kNaN;
     return;
   }
   const double v_raw = invert_drag(k, mu, out.f[axis]);

@@ -100,8 +100,9 @@ struct DragVelocityCounters {
 
 class DragVelocityEstimator {
  public:
-  // Throws std::invalid_argument for invalid params or a bad config. An axis without drag (k = mu = 0, as before
-  // identification) has nothing to invert: its force is still compensated, its velocity reads NaN.
+  // Throws std::invalid_argument for invalid params or a bad config. An axis without drag (k = mu = 0) has nothing to
+  // invert: its force is still compensated. With drag on the other axis it reads rest, with rest_speed_std's variance
+  // (the limit of weighing against rest as the drag vanishes); with drag on neither (nothing identified yet) NaN.
   DragVelocityEstimator(const FullModelParams& params, const DragVelocityConfig& config);
 
   // O(1) work (amortised, with a time offset) and no allocation. Returns the estimate for the sample delay_samples()

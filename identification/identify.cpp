@@ -400,8 +400,10 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
   require_reference(series, "evaluating the velocity");
   if (series.size() == 0) throw std::invalid_argument("no samples to evaluate");
   DragVelocityEstimator estimator(params, config);
-  if (!estimator.has_drag(0) || !estimator.has_drag(1))
-    throw std::invalid_argument("evaluating the velocity needs drag identified on both horizontal axes");
+  // An axis without drag reads rest when the other has one (DragVelocityEstimator): scored as such, as the anchor
+  // scores an axis where it reads no drag.
+  if (!estimator.has_drag(0) && !estimator.has_drag(1))
+    throw std::invalid_argument("evaluating the velocity needs drag identified on a horizontal axis");
   std::vector<VelocityEvaluation> out(windows.size());
   for (std::size_t w = 0; w < windows.size(); ++w) out[w].window = clip(windows[w], series.t, "evaluation");
 

@@ -16,7 +16,7 @@ namespace imubridge::estimator {
 
 struct VelocityScores {
   VelocityError train, validation;
-  // Non-empty when the estimator gives no velocity with this model (no drag law on an axis yet): the scores are then
+  // Non-empty when the estimator gives no velocity with this model (no drag law on either axis yet): the scores are then
   // zero velocity's, which is what such a model tells a user, and this says so.
   std::string note;
 };
@@ -85,7 +85,7 @@ struct TransferOffset {
   bool at_limit = false;      // NEES stays above 2 at kMaxTransferOffsetStd: the error is not an offset alone
   std::size_t flights = 0, samples = 0;
 };
-// Throws std::invalid_argument for no flights, a flight without a reference, or params without drag on both axes.
+// Throws std::invalid_argument for no flights, a flight without a reference, or params without drag on either axis.
 TransferOffset measure_transfer_offset(std::span<const ImuSeries> flights, std::span<const TimeWindow> windows,
                                        const ModelParams& params);
 

@@ -443,7 +443,9 @@ TEST(DragVelocityEstimator, RestartsTheDifferentiatorAfterAGapAndCarriesOn) {
   for (int axis = 0; axis < 2; ++axis) EXPECT_LT(std::abs(error[axis]), 3.0 * std::sqrt(first_after_gap->v_var[axis]));
 }
 
-TEST(DragVelocityEstimator, WithoutDragOnAnAxisCompensatesButReportsNoVelocity) {
+// An axis the model reads no drag on, beside one it does, has nothing to measure its velocity by: it reads rest, as
+// sure as the prior and no surer (never a speed), and the compensation is the same. Nothing identified: unknown.
+TEST(DragVelocityEstimator, WithoutDragOnAnAxisReadsRestThereAsSureAsThePrior) {
   const Flight flight = fly(5.0, 14);
   FullModelParams p = flight_params();
   p.drag_linear.y() = 0.0;  // y not identified yet
@@ -456,9 +458,13 @@ TEST(DragVelocityEstimator, WithoutDragOnAnAxisCompensatesButReportsNoVelocity) 
   ASSERT_FALSE(rp.estimates.empty());
   for (std::size_t i = 0; i < rp.estimates.size(); ++i) {
     EXPECT_EQ(rp.estimates[i].f, rf.estimates[i].f);  // compensation does not depend on drag
-    EXPECT_TRUE(std::isnan(rp.estimates[i].v.y()));
-    EXPECT_TRUE(std::isnan(rp.estimates[i].v_raw.y()));
+    EXPECT_EQ(rp.estimates[i].v.y(), 0.0);
+    EXPECT_EQ(rp.estimates[i].v_raw.y(), 0.0);
+    const double prior = flight_config().rest_speed_std * flight_config().rest_speed_std;
+    EXPECT_EQ(rp.estimates[i].v_var.y(), prior);
+    EXPECT_EQ(rp.estimates[i].v_raw_var.y(), prior);
     EXPECT_TRUE(std::isfinite(rp.estimates[i].v.x()));
+    EXPECT_LT(rp.estimates[i].v_var.x(), prior);
   }
   DragVelocityEstimator none(FullModelParams{}, flight_config());  // the defaults: nothing identified at all
   const Estimates rn = run(none, flight.samples);

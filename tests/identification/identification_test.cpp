@@ -437,6 +437,20 @@ TEST(VelocityEvaluation, NeedsAReferenceAndDrag) {
   EXPECT_EQ(part.samples, 2000u);
 }
 
+// A model that reads drag on x only (the X500's loop, docs/results.md) is scored as the estimator flies it: the
+// x velocity from the drag, rest on y, so y's error is exactly "not moving"'s, as the anchor scores an axis without
+// drag. It was refused ("needs drag on both axes"), and a user of such a model was told nothing.
+TEST(VelocityEvaluation, AnAxisWithoutDragIsScoredAsRest) {
+  const Flight& f = flight("center");
+  FullModelParams x_only;
+  x_only.drag_quadratic = {kPaperMu, 0.0};
+  const VelocityEvaluation e = evaluate_velocity(f.series, x_only);
+  EXPECT_EQ(e.estimator.axis.y(), e.zero.axis.y());
+  EXPECT_GT(e.zero.axis.y(), 0.0);
+  EXPECT_LT(e.estimator.axis.x(), 0.5 * e.zero.axis.x());
+  EXPECT_LT(e.estimator.horizontal, e.zero.horizontal);
+}
+
 // ---- reading a session ----
 
 constexpr double kYawRate = 0.4;  // rad/s: the reference turns about z at a constant rate
