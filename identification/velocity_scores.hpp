@@ -16,8 +16,8 @@ namespace imubridge::estimator {
 
 struct VelocityScores {
   VelocityError train, validation;
-  // Non-empty when the estimator gives no velocity with this model (no drag law on either axis yet): the scores are then
-  // zero velocity's, which is what such a model tells a user, and this says so.
+  // Non-empty when the estimator gives no velocity with this model (no drag law on either axis yet): the scores are
+  // then zero velocity's, which is what such a model tells a user, and this says so.
   std::string note;
 };
 
