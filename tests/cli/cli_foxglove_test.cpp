@@ -28,8 +28,6 @@ namespace {
 
 using nlohmann::json;
 
-// A number of a message equal to the stored double: JSON has no NaN, so the message says null.
-
 // `node tests/foxglove_client.cjs URL` as a child process; what it prints (one JSON object per line) goes to a file,
 // read here as it grows.
 class NodeClient {
