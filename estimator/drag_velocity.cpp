@@ -39,7 +39,8 @@ void check(const DragVelocityConfig& c) {
   const bool positive = c.max_gap > 0.0 && c.accel_noise > 0.0 && c.accel_process_noise > 0.0 && c.gyro_noise > 0.0 &&
                         c.gyro_bias_walk > 0.0 && c.initial_velocity_std > 0.0 && c.initial_tilt_std > 0.0 &&
                         c.initial_gyro_bias_std > 0.0 && c.max_specific_force > 0.0 && c.max_rate > 0.0 &&
-                        c.accel_offset_std >= 0.0 && c.wind_std >= 0.0 && c.rest_speed_std > 0.0;
+                        c.accel_offset_std >= 0.0 && c.wind_std >= 0.0 && c.rest_speed_std > 0.0 &&
+                        c.landed_speed_std > 0.0;
   if (!positive) throw std::invalid_argument("DragVelocityEstimator: config times, noises and limits must be positive");
 }
 
@@ -135,15 +136,17 @@ std::optional<DragVelocityEstimate> DragVelocityEstimator::update(const ImuSampl
   const ImuSample& centre = history_[(head_ + delay_samples()) % window];
 
   const Eigen::Vector3d f_cm = compensator_.compensate(centre.accel, centre.gyro, *gyro_rate);
-  propagate_to(centre);
+  propagate_to(centre, f_cm.head<2>());
 
   DragVelocityEstimate out;
   out.t = centre.t;
   out.f = f_cm.head<2>();
   const WindLinearisation wind = linearise_wind();
   for (int axis = 0; axis < 2; ++axis) fuse_axis(axis, wind, out);
+  if (diverged()) reset_after_divergence(out);
   out.gyro_bias = x_.tail<2>();
   ++counters_.estimates_out;
+  if (landed_) ++counters_.landed;
   return out;
 }
 
@@ -169,11 +172,11 @@ bool DragVelocityEstimator::accept(const ImuSample& sample) {
   return true;
 }
 
-void DragVelocityEstimator::propagate_to(const ImuSample& centre) {
+void DragVelocityEstimator::propagate_to(const ImuSample& centre, const Eigen::Vector2d& force) {
   if (filter_t_) {
     const double dt = centre.t - *filter_t_;
     if (dt <= config_.max_gap) {
-      predict(dt, compensator_.to_body(centre.gyro));
+      predict(dt, compensator_.to_body(centre.gyro), landed_ ? &force : nullptr);
     } else {
       // No rates across the gap: keep the state and grow the uncertainty as the process noise would.
       p_.diagonal() += process_density_ * dt;
@@ -202,6 +205,7 @@ void DragVelocityEstimator::fuse_axis(int axis, const WindLinearisation& w, Drag
   out.innovation[axis] = out.f[axis] - drag_specific_force(k, mu, out.prior_air_velocity[axis]);
   const double prior_slope = fusion_slope(axis, out.prior_air_velocity[axis]);
   out.innovation_var[axis] = prior_slope * prior_slope * p_(axis, axis) + f_var;
+  if (landed_) return fuse_zero_velocity(axis, out);
   if (!has_drag(axis)) {
     // Nothing reads this axis's velocity. A model with drag on the other axis is a velocity estimator that knows
     // nothing here: rest, as sure as the prior (weigh_against_rest as k -> 0), never a speed nobody measured. With
@@ -237,6 +241,32 @@ void DragVelocityEstimator::weigh_against_rest(int axis, DragVelocityEstimate& o
   out.v_var[axis] = known * rest / (rest + known);
 }
 
+bool DragVelocityEstimator::diverged() const {
+  // No velocity is ever known to a tenth of a millimetre per second (the legs' own is 0.05 m/s): a variance below is
+  // the covariance losing its positive definiteness, a step before it turns NaN and never recovers.
+  constexpr double kMinVelocityVariance = 1e-8;  // (m/s)^2: 0.1 mm/s
+  return !x_.allFinite() || !p_.allFinite() || !(p_(0, 0) > kMinVelocityVariance) ||
+         !(p_(1, 1) > kMinVelocityVariance) || !(p_.diagonal().minCoeff() > 0.0);
+}
+
+void DragVelocityEstimator::reset_after_divergence(DragVelocityEstimate& out) {
+  ++counters_.resets;
+  // Level, at rest and unbiased, as at the start: whatever wrecked the covariance wrecked every state with it.
+  x_.setZero();
+  Vector6d std;
+  std << config_.rest_speed_std, config_.rest_speed_std, config_.initial_tilt_std, config_.initial_tilt_std,
+      config_.initial_gyro_bias_std, config_.initial_gyro_bias_std;
+  p_ = std.array().square().matrix().asDiagonal();
+  for (int axis = 0; axis < 2; ++axis) {
+    if (landed_) {
+      out.v[axis] = x_[axis];
+      out.v_var[axis] = p_(axis, axis);
+    } else if (has_drag(axis)) {
+      weigh_against_rest(axis, out);
+    }
+  }
+}
+
 void DragVelocityEstimator::restart_window() {
   differentiator_.reset();
   head_ = 0;
@@ -254,38 +284,51 @@ void DragVelocityEstimator::restart_clock(double elapsed) {
   filter_t_.reset();
 }
 
-void DragVelocityEstimator::predict(double dt, const Eigen::Vector3d& w_measured) {
+void DragVelocityEstimator::predict(double dt, const Eigen::Vector3d& w_measured, const Eigen::Vector2d* held_force) {
   const double vx = x_[0], vy = x_[1], gx = x_[2], gy = x_[3];
   const double wx = w_measured.x() - x_[4];
   const double wy = w_measured.y() - x_[5];
   const double wz = w_measured.z();  // yaw-rate bias is not observable from horizontal drag; left in the noise
   const double gz = std::sqrt(std::max(1.0 - gx * gx - gy * gy, kMinGammaZ * kMinGammaZ));
-  const double kx = params_.drag_linear.x(), ky = params_.drag_linear.y();
-  const double mux = params_.drag_quadratic.x(), muy = params_.drag_quadratic.y();
-  // Drag acts on the air velocity, v - R^T w; without wind that is v itself, and the arithmetic below is the same.
-  double ax = vx, ay = vy;
-  Eigen::Matrix2d wind_jacobian;
-  if (windy_) {
-    const Eigen::Vector2d wind = wind_in_body(&wind_jacobian);
-    ax = vx - wind.x();
-    ay = vy - wind.y();
+  // In the air the horizontal force is the drag of the air velocity, v - R^T w (v itself without wind); on the ground
+  // it is what the accelerometer measures, whatever holds the vehicle, and depends on no state.
+  double force_x = 0.0, force_y = 0.0, slope_x = 0.0, slope_y = 0.0;
+  Eigen::Matrix2d wind_jacobian = Eigen::Matrix2d::Zero();
+  if (held_force) {
+    force_x = held_force->x();
+    force_y = held_force->y();
+  } else {
+    const double kx = params_.drag_linear.x(), ky = params_.drag_linear.y();
+    const double mux = params_.drag_quadratic.x(), muy = params_.drag_quadratic.y();
+    double ax = vx, ay = vy;
+    if (windy_) {
+      const Eigen::Vector2d wind = wind_in_body(&wind_jacobian);
+      ax = vx - wind.x();
+      ay = vy - wind.y();
+    }
+    force_x = drag_specific_force(kx, mux, ax);
+    force_y = drag_specific_force(ky, muy, ay);
+    slope_x = drag_slope(kx, mux, ax);
+    slope_y = drag_slope(ky, muy, ay);
   }
 
-  // Body-frame velocity: v_dot = drag(v) + g*gamma - w x v (horizontal rows; the w x v terms through the small
+  // Body-frame velocity: v_dot = force + g*gamma - w x v (horizontal rows; the w x v terms through the small
   // vertical body velocity are left to the process noise). Gravity direction in body axes: gamma_dot = -w x gamma.
   Vector6d x_dot;
-  x_dot << drag_specific_force(kx, mux, ax) + kGravity * gx + wz * vy,
-      drag_specific_force(ky, muy, ay) + kGravity * gy - wz * vx, wz * gy - wy * gz, wx * gz - wz * gx, 0.0, 0.0;
+  x_dot << force_x + kGravity * gx + wz * vy, force_y + kGravity * gy - wz * vx, wz * gy - wy * gz, wx * gz - wz * gx,
+      0.0, 0.0;
 
   Matrix6d a = Matrix6d::Zero();
-  a.row(0) << -drag_slope(kx, mux, ax), wz, kGravity, 0.0, 0.0, 0.0;
-  a.row(1) << -wz, -drag_slope(ky, muy, ay), 0.0, kGravity, 0.0, 0.0;
+  a.row(0) << -slope_x, wz, kGravity, 0.0, 0.0, 0.0;
+  a.row(1) << -wz, -slope_y, 0.0, kGravity, 0.0, 0.0;
   a.row(2) << 0.0, 0.0, wy * gx / gz, wz + wy * gy / gz, 0.0, gz;
   a.row(3) << 0.0, 0.0, -wz - wx * gx / gz, -wx * gy / gz, -gz, 0.0;
   if (windy_) {
-    // d drag(v - w_b) / d gamma = slope * d w_b / d gamma: the tilt turns the wind into the body's axes.
-    a.block<1, 2>(0, 2) -= a(0, 0) * wind_jacobian.row(0);
-    a.block<1, 2>(1, 2) -= a(1, 1) * wind_jacobian.row(1);
+    if (!held_force) {
+      // d drag(v - w_b) / d gamma = slope * d w_b / d gamma: the tilt turns the wind into the body's axes.
+      a.block<1, 2>(0, 2) -= a(0, 0) * wind_jacobian.row(0);
+      a.block<1, 2>(1, 2) -= a(1, 1) * wind_jacobian.row(1);
+    }
     // The ZYX yaw rate, (w_y sin(roll) + w_z cos(roll)) / cos(pitch), written with gamma.
     turn_heading(dt * (wy * gy + wz * gz) / (gy * gy + gz * gz));
   }
@@ -365,7 +408,10 @@ void DragVelocityEstimator::fuse_velocity(int axis, double v_measured) {
   // the noisy measurement. A zero slope (pure quadratic drag at rest) carries no information: skip.
   const double slope = fusion_slope(axis, x_[axis]);
   if (!(slope > 0.0)) return;
-  const double r = config_.accel_noise * config_.accel_noise / (slope * slope);
+  update_velocity(axis, v_measured, config_.accel_noise * config_.accel_noise / (slope * slope));
+}
+
+void DragVelocityEstimator::update_velocity(int axis, double v_measured, double r) {
   const Vector6d gain = p_.col(axis) / (p_(axis, axis) + r);
   x_ += gain * (v_measured - x_[axis]);
   p_ -= gain * p_.row(axis);

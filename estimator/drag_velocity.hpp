@@ -42,6 +42,9 @@ struct DragVelocityConfig {
   // kBriskSpeed). The output is the filter's velocity weighed against it: where the drag's slope is too weak for the
   // offset above to be small, the estimate relaxes towards rest and its variance says how little is known.
   double rest_speed_std = 5.0;  // m/s
+  // How still a vehicle stands that the autopilot's land detector calls landed (set_landed): on its legs, motors
+  // idling or off, it moves by centimetres per second at most.
+  double landed_speed_std = 0.05;  // m/s
   // Beyond any MEMS full scale: a sample outside is corrupt, and one would wreck the filter's state.
   double max_specific_force = 16.0 * kGravity;  // m/s^2, per axis
   double max_rate = 35.0;                       // rad/s (2000 deg/s), per axis
@@ -93,6 +96,11 @@ struct DragVelocityCounters {
   std::uint64_t rejected_time = 0;          // timestamp not after the previous accepted sample's
   std::uint64_t gaps = 0;                   // restarts after more than max_gap without samples
   std::uint64_t clock_restarts = 0;         // the device's clock started again (restart_clock)
+  // Estimates made on the ground (set_landed): a zero-velocity update instead of the drag.
+  std::uint64_t landed = 0;
+  // The filter lost itself (a state or variance not finite, or a velocity variance collapsed to nothing: a crash's
+  // tumble and 12-g spikes do it) and started again from level and rest, knowing nothing of the velocity.
+  std::uint64_t resets = 0;
   // Accepted samples not estimated because the time_offset aligner had no history |time_offset| back yet: the first
   // |time_offset| seconds of the flight and after each gap (always 0 without a time offset).
   std::uint64_t aligning = 0;
@@ -114,6 +122,14 @@ class DragVelocityEstimator {
   // after its last sample. The differentiator and the aligner start again as after a gap; the state is kept, its
   // uncertainty grown by `elapsed` of process noise, so a short restart costs the velocity nothing.
   void restart_clock(double elapsed);
+
+  // The autopilot's land detector (docs/estimator.md, "On the ground"): while landed, the legs hold the vehicle, not
+  // the air, so the filter fuses rest (landed_speed_std) in place of the drag law and predicts with the measured
+  // horizontal force, which levels its tilt on the accelerometer and lets it learn the gyro bias: no speed is read
+  // into the stance's tilt or the accelerometer's offset, and the flight starts from rest. Takes effect from the
+  // next update. Without a land detector nothing calls it, and the filter reads the drag from its first sample.
+  void set_landed(bool landed) { landed_ = landed; }
+  bool landed() const { return landed_; }
 
   const DragVelocityCounters& counters() const { return counters_; }
   int delay_samples() const { return differentiator_.delay_samples(); }
@@ -138,21 +154,32 @@ class DragVelocityEstimator {
   // Counts a sample that is not finite, out of range or not after the last as rejected (false); restarts the window
   // after a gap.
   bool accept(const ImuSample& sample);
-  // Predicts the state to the window centre's time, or across a gap grows its uncertainty alone.
-  void propagate_to(const ImuSample& centre);
+  // Predicts the state to the window centre's time, or across a gap grows its uncertainty alone. `force` is the
+  // centre's compensated horizontal specific force, which drives the prediction on the ground.
+  void propagate_to(const ImuSample& centre, const Eigen::Vector2d& force);
   // With wind the drag inverts to the air velocity; the state and the output stay the ground velocity. Zero without.
   WindLinearisation linearise_wind() const;
-  // One horizontal axis's prediction, drag measurement and output into `out` (whose f is set).
+  // One horizontal axis's prediction, drag measurement (or, landed, rest) and output into `out` (whose f is set).
   void fuse_axis(int axis, const WindLinearisation& wind, DragVelocityEstimate& out);
+  // Landed: the zero-velocity update on `axis` and its output (estimator/zero_velocity_update.cpp).
+  void fuse_zero_velocity(int axis, DragVelocityEstimate& out);
   // The output velocity and variance: the filter's, with the offset's share, weighed against rest.
   void weigh_against_rest(int axis, DragVelocityEstimate& out) const;
   // Pairs the accelerometer with the gyro of time_offset earlier: delays the gyro (time_offset > 0) or the
   // accelerometer (< 0) through a ring. False while the ring does not reach back far enough.
   bool align(ImuSample& sample);
+  // Whether the filter has lost itself (DragVelocityCounters::resets).
+  bool diverged() const;
+  // Starts the state again from level and rest, the velocity as unknown as the prior, and writes that into `out`.
+  void reset_after_divergence(DragVelocityEstimate& out);
   // Empties the differentiator's window and the aligner: no derivative or interpolation across a break.
   void restart_window();
-  void predict(double dt, const Eigen::Vector3d& w_measured);
+  // `held_force`: on the ground, the measured horizontal specific force in place of the drag law's.
+  void predict(double dt, const Eigen::Vector3d& w_measured, const Eigen::Vector2d* held_force);
+  // The drag law inverted, fused as a velocity measurement with the accelerometer's noise through the law's slope.
   void fuse_velocity(int axis, double v_measured);
+  // The scalar Kalman update of the velocity on `axis` by a measurement of variance `r`.
+  void update_velocity(int axis, double v_measured, double r);
   // |d drag / d v| on `axis` for fusing there (its noise is the accelerometer's divided by it).
   double fusion_slope(int axis, double predicted) const;
   // Turns the heading by `angle` (rad).
@@ -185,6 +212,8 @@ class DragVelocityEstimator {
   // cosine and sine.
   bool windy_ = false;
   double heading_cos_ = 1.0, heading_sin_ = 0.0;
+
+  bool landed_ = false;  // set_landed
 
   // x = (v_x, v_y, gamma_x, gamma_y, b_x, b_y): body velocity, body x, y of the gravity direction, gyro bias.
   Vector6d x_ = Vector6d::Zero();

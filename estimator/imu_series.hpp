@@ -9,6 +9,13 @@
 
 namespace imubridge::estimator {
 
+struct TimeWindow {
+  double start = 0.0;  // s, session time
+  double end = 0.0;    // s, exclusive
+
+  friend bool operator==(const TimeWindow&, const TimeWindow&) = default;
+};
+
 // One IMU measurement: what the live estimator consumes.
 struct ImuSample {
   double t = 0.0;                                   // s
@@ -27,9 +34,26 @@ struct ImuSeries {
   std::vector<Eigen::Vector3d> gyro;         // rad/s, IMU axes
   std::vector<Eigen::Vector3d> accel;        // m/s^2, IMU axes
   std::optional<ReferenceSeries> reference;  // same length as t when present
+  // Where the autopilot's land detector says the vehicle stood on the ground, on t's clock, in time order: the
+  // estimator fuses rest there (DragVelocityEstimator::set_landed), as the live pipeline does. Empty without one.
+  std::vector<TimeWindow> landed;
 
   std::size_t size() const { return t.size(); }
   ImuSample sample(std::size_t i) const { return {t[i], gyro[i], accel[i]}; }
+};
+
+// Whether the land detector says landed at each of a series' times in turn (non-decreasing): one pass over `landed`.
+class LandedCursor {
+ public:
+  explicit LandedCursor(const std::vector<TimeWindow>& landed) : landed_(landed) {}
+  bool at(double t) {
+    while (next_ < landed_.size() && !(t < landed_[next_].end)) ++next_;
+    return next_ < landed_.size() && landed_[next_].start <= t;
+  }
+
+ private:
+  const std::vector<TimeWindow>& landed_;
+  std::size_t next_ = 0;
 };
 
 // Why `series` cannot be used (mismatched lengths, non-finite values, times not strictly increasing, attitude not

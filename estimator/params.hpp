@@ -13,18 +13,12 @@
 #include <vector>
 
 #include "estimator/full_model.hpp"
+#include "estimator/imu_series.hpp"
 #include "estimator/paper_model.hpp"
 
 namespace imubridge::estimator {
 
 inline constexpr int kParamsVersion = 1;
-
-struct TimeWindow {
-  double start = 0.0;  // s, session time
-  double end = 0.0;    // s, exclusive
-
-  friend bool operator==(const TimeWindow&, const TimeWindow&) = default;
-};
 
 // Filled by the identification; empty means "not identified".
 struct Identification {

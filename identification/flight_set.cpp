@@ -18,6 +18,7 @@ ImuSeries cut(const ImuSeries& series, const TimeWindow& window) {
   out.accel = take(series.accel);
   if (series.reference)
     out.reference = ReferenceSeries{take(series.reference->velocity_ned), take(series.reference->attitude)};
+  out.landed = series.landed;  // on the same clock
   return out;
 }
 
@@ -46,6 +47,10 @@ FlightSet join_flights(std::span<const ImuSeries> flights, std::size_t align) {
     // The last sample's period, as data_span() counts it: the flight ends one period after its last sample.
     const double end = f.t[n - 1] + (f.t[n - 1] - f.t[n - 2]) + shift;
     out.placed.push_back({next_start, end});
+    for (const TimeWindow& w : f.landed) {  // moved with the flight, and kept to its place
+      const TimeWindow moved{std::max(w.start + shift, next_start), std::min(w.end + shift, end)};
+      if (moved.start < moved.end) out.series.landed.push_back(moved);
+    }
     out.shift.push_back(shift);
     out.flown_seconds += end - next_start;
     next_start = end + kFlightGapSeconds;

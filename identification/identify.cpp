@@ -421,7 +421,9 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
     double nees = 0.0;
   };
   std::vector<Sums> sums(windows.size());
+  LandedCursor landed(series.landed);
   for (std::size_t k = 0; k < series.size(); ++k) {
+    estimator.set_landed(landed.at(series.t[k]));
     const std::optional<DragVelocityEstimate> e = estimator.update(series.sample(k));
     if (!e) continue;
     // The estimate describes an earlier sample (the differentiator's delay): score it against that one.

@@ -182,11 +182,12 @@ struct VelocityEvaluation {
   DragVelocityCounters counters;
 };
 
-// Runs DragVelocityEstimator over the whole series (its state needs the flight's start) and scores the samples in
-// `window` (default: all). Every row is scored in the estimator's body frame: the reference's velocity, in the
-// series' axes, is turned by the mounting (R_bs = Exp(mounting), IMU -> body) first. Throws std::invalid_argument
-// without a reference, for params the estimator refuses, for a model without drag on either axis (no velocity to
-// score; an axis without drag beside one with it reads rest and is scored so) or for an empty window.
+// Runs DragVelocityEstimator over the whole series (its state needs the flight's start), fusing rest where the
+// series' land detector says landed, and scores the samples in `window` (default: all). Every row is scored in the
+// estimator's body frame: the reference's velocity, in the series' axes, is turned by the mounting (R_bs =
+// Exp(mounting), IMU -> body) first. Throws std::invalid_argument without a reference, for params the estimator
+// refuses, for a model without drag on either axis (no velocity to score; an axis without drag beside one with it reads
+// rest and is scored so) or for an empty window.
 VelocityEvaluation evaluate_velocity(const ImuSeries& series, const FullModelParams& params,
                                      const std::optional<TimeWindow>& window = std::nullopt,
                                      const DragVelocityConfig& config = {});

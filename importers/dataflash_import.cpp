@@ -18,6 +18,8 @@ namespace {
 
 constexpr double kRadiansPerDegree = M_PI / 180;
 constexpr std::int64_t kArmedEvent = 10, kDisarmedEvent = 11;  // ArduPilot's EV ids
+// ArduCopter's land detector (set_land_complete): landed, and no longer landed.
+constexpr std::int64_t kLandCompleteEvent = 18, kNotLandedEvent = 28;
 
 std::int64_t ns(std::uint64_t us) { return static_cast<std::int64_t>(us) * 1000; }
 
@@ -197,7 +199,8 @@ std::string copter_mode_name(std::int64_t mode) {
   return it == kNames.end() ? "" : it->second;
 }
 
-// MSG, MODE and arming (EV 10 and 11, or ARM) as events, in time order (stable: a log's order where times tie).
+// MSG, MODE, arming (EV 10 and 11, or ARM) and the land detector (EV 28 and 18: takeoff and landing) as events, in time
+// order (stable: a log's order where times tie).
 std::vector<LogEvent> events(const dataflash::Log& log, DataflashImportResult& result) {
   std::vector<LogEvent> out;
   bool copter = false;
@@ -229,6 +232,14 @@ std::vector<LogEvent> events(const dataflash::Log& log, DataflashImportResult& r
       const std::int64_t id = ev->integer(r, *ev->field("Id"));
       if (id == kArmedEvent || id == kDisarmedEvent)
         arming(ev->times[r], id == kArmedEvent, "EV " + std::to_string(id));
+      // As import ulog stores PX4's: what --in-flight takes the flight from, and where the filter fuses rest.
+      if (id == kNotLandedEvent || id == kLandCompleteEvent) {
+        const bool landed = id == kLandCompleteEvent;
+        out.push_back({ev->times[r], landed ? "landing" : "takeoff",
+                       landed ? "the land detector: landed (EV 18, LAND_COMPLETE)"
+                              : "the land detector: no longer landed (EV 28, NOT_LANDED)"});
+        ++result.land_detector_changes;
+      }
     }
   }
   if (const auto* arm = log.message("ARM"); arm) {

@@ -34,13 +34,14 @@ struct DataflashImportOptions {
 };
 
 struct DataflashImportResult : ImuLogImportResult {
-  unsigned instance = 0;                 // the IMU instance imported
-  std::map<unsigned, std::string> imus;  // every IMU instance in the log: "IMU2: 11916"
-  std::string reference_source;          // "EKF1 (attitude from its Roll, Pitch, Yaw)", ...; empty: none
-  std::uint64_t log_events = 0;          // MSG records
-  std::uint64_t mode_changes = 0;        // MODE records
-  std::uint64_t arming_changes = 0;      // armed and disarmed, from EV or ARM
-  std::uint64_t params = 0;              // parameters (PARM names)
+  unsigned instance = 0;                    // the IMU instance imported
+  std::map<unsigned, std::string> imus;     // every IMU instance in the log: "IMU2: 11916"
+  std::string reference_source;             // "EKF1 (attitude from its Roll, Pitch, Yaw)", ...; empty: none
+  std::uint64_t log_events = 0;             // MSG records
+  std::uint64_t mode_changes = 0;           // MODE records
+  std::uint64_t arming_changes = 0;         // armed and disarmed, from EV or ARM
+  std::uint64_t land_detector_changes = 0;  // takeoffs and landings, from EV 28 and 18
+  std::uint64_t params = 0;                 // parameters (PARM names)
 };
 
 // Throws std::invalid_argument (dataflash::ParseError among them), before writing anything, when the file cannot be

@@ -59,7 +59,7 @@ void EstimationStage::update(const protocol::Sample& sample, std::vector<store::
     const bool decided = accel.allFinite() && gyro.allFinite() &&
                          state.detector->add(static_cast<double>(sample.device_time_us) * 1e-6, accel, gyro);
     if (state.declared.automatic) {
-      state.waiting.push_back(sample);
+      state.waiting.push_back({sample, landed_links_.contains(sample.source.link)});
       if (!decided) return;
       resolve(sample.source, state, state.detector->result());
       release_waiting(state, out);
@@ -67,14 +67,22 @@ void EstimationStage::update(const protocol::Sample& sample, std::vector<store::
     }
     if (decided) resolve(sample.source, state, state.detector->result());
   }
-  if (auto e = estimate(state, sample)) out.push_back(*e);
+  if (auto e = estimate(state, sample, landed_links_.contains(sample.source.link))) out.push_back(*e);
+}
+
+void EstimationStage::set_landed(std::uint32_t link, bool landed) {
+  if (landed) {
+    landed_links_.insert(link);
+  } else {
+    landed_links_.erase(link);
+  }
 }
 
 void EstimationStage::release_waiting(LinkState& link, std::vector<store::Estimate>& out) {
-  std::vector<protocol::Sample> waiting = std::move(link.waiting);
+  std::vector<LinkState::Held> waiting = std::move(link.waiting);
   link.waiting = {};
-  for (const protocol::Sample& s : waiting) {
-    if (auto e = estimate(link, s)) out.push_back(*e);
+  for (const LinkState::Held& held : waiting) {
+    if (auto e = estimate(link, held.sample, held.landed)) out.push_back(*e);
   }
 }
 
@@ -103,7 +111,7 @@ void EstimationStage::finish(const Released& released) {
       // Decide on the mean specific force of what came: the detector's own flight rule, applied early.
       std::vector<double> t;
       std::vector<Eigen::Vector3d> accel, gyro;
-      for (const protocol::Sample& s : state.waiting) {
+      for (const auto& [s, landed] : state.waiting) {
         const Eigen::Vector3d a(s.accel[0], s.accel[1], s.accel[2]), w(s.gyro[0], s.gyro[1], s.gyro[2]);
         if (!a.allFinite() || !w.allFinite() || (!t.empty() && s.device_time_us * 1e-6 <= t.back())) continue;
         t.push_back(static_cast<double>(s.device_time_us) * 1e-6);
@@ -119,7 +127,7 @@ void EstimationStage::finish(const Released& released) {
   }
 }
 
-std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const protocol::Sample& sample) {
+std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const protocol::Sample& sample, bool landed) {
   if (sample.clock_epoch != link.clock_epoch) {
     // The device restarted: its times count from zero again. The samples still in the window before it will get no
     // estimate, as before a gap; every one after it will.
@@ -131,8 +139,8 @@ std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const 
   }
   link.last_recv_mono_ns = sample.recv_mono_ns;
   const double t = static_cast<double>(sample.device_time_us) * 1e-6;
-  estimator::ImuSample input{t, {sample.gyro[0], sample.gyro[1], sample.gyro[2]},
-                             {sample.accel[0], sample.accel[1], sample.accel[2]}};
+  estimator::ImuSample input{
+      t, {sample.gyro[0], sample.gyro[1], sample.gyro[2]}, {sample.accel[0], sample.accel[1], sample.accel[2]}};
   if (link.rotate) {
     input.gyro = link.imu_to_body * input.gyro;
     input.accel = link.imu_to_body * input.accel;
@@ -142,6 +150,7 @@ std::optional<store::Estimate> EstimationStage::estimate(LinkState& link, const 
     return c.rejected_non_finite + c.rejected_out_of_range + c.rejected_time;
   };
   const std::uint64_t rejected_before = rejected();
+  link.estimator.set_landed(landed);
   const auto estimate = link.estimator.update(input);
   if (rejected() != rejected_before) return std::nullopt;  // counted by the estimator, never to be estimated
   link.pending.emplace_back(t, sample.seq);

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <optional>
+#include <set>
 #include <span>
 #include <vector>
 
@@ -57,6 +58,11 @@ class EstimationStage {
   // The same, every source's estimates appended to `out`.
   void finish(std::vector<store::Estimate>& out);
 
+  // The autopilot's land detector for link `link` (SourceKey::link, every source heard through it): the estimators
+  // fuse rest while it says landed (estimator::DragVelocityEstimator::set_landed). A sample waiting for its link's
+  // axes is estimated with the state it arrived in.
+  void set_landed(std::uint32_t link, bool landed);
+
   const estimator::ModelParams& params() const { return params_; }
   const std::optional<StageAxes>& axes() const { return axes_; }
   int delay_samples() const;
@@ -69,8 +75,12 @@ class EstimationStage {
     Eigen::Matrix3d imu_to_body = Eigen::Matrix3d::Identity();
     bool rotate = false;                              // imu_to_body is not the identity
     std::optional<estimator::UpDetector> detector{};  // until the axes are resolved or checked
-    std::vector<protocol::Sample> waiting{};          // an auto link's samples until its axes are decided
-    std::uint32_t clock_epoch = 0;                    // the device's restarts so far (protocol::Sample)
+    struct Held {
+      protocol::Sample sample;
+      bool landed = false;  // the land detector's state when it came
+    };
+    std::vector<Held> waiting{};    // an auto link's samples until its axes are decided
+    std::uint32_t clock_epoch = 0;  // the device's restarts so far (protocol::Sample)
     std::optional<std::int64_t> last_recv_mono_ns{};
   };
 
@@ -80,12 +90,13 @@ class EstimationStage {
                const std::optional<estimator::AxesDetection>& detection);
   // An auto source's samples held until its axes were decided, estimated now into `out`.
   void release_waiting(LinkState& link, std::vector<store::Estimate>& out);
-  std::optional<store::Estimate> estimate(LinkState& link, const protocol::Sample& sample);
+  std::optional<store::Estimate> estimate(LinkState& link, const protocol::Sample& sample, bool landed);
 
   estimator::ModelParams params_;
   estimator::DragVelocityConfig config_;
   std::optional<StageAxes> axes_;
   std::map<protocol::SourceKey, LinkState> links_;
+  std::set<std::uint32_t> landed_links_;  // set_landed
 };
 
 }  // namespace imubridge::pipeline

@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "pipeline/land_detector.hpp"
 #include "pipeline/radio_link.hpp"
 
 namespace imubridge::pipeline {
@@ -51,6 +52,7 @@ void LinkRecorder::on_chunk(const DecodedChunk& chunk) {
   add_new_radios(chunk.decoder);
   record_lock(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
   record_reference(chunk.decoder, chunk.recv_mono_ns, false);
+  record_land_detector(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
   store_samples(chunk.samples);
   record_losses(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
   if (chunk.end) end(chunk.decoder, chunk.recv_mono_ns, chunk.recv_wall_ns);
@@ -107,6 +109,28 @@ void LinkRecorder::record_lock(const LinkDecoder& decoder, std::int64_t mono_ns,
                        .kind = "mavlink_imu",
                        .count = 1,
                        .detail = "samples from " + protocol::mavlink::describe(imu) + " only: the first IMU heard"});
+}
+
+// The IMU's autopilot's land detector (EXTENDED_SYS_STATE) changing its mind, as `takeoff` and `landing` events, as
+// `import ulog` stores PX4's: what `--in-flight` and `evaluate` read the flight from. Replay needs none: the engine
+// reads the same messages from the same chunks.
+void LinkRecorder::record_land_detector(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns) {
+  const auto imu = decoder.mavlink_imu();
+  for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
+    const std::optional<bool> landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
+    if (!landed) continue;
+    if (landed_ && *landed_ != *landed) {
+      store_.append_event(session_,
+                          {.link_id = row_,
+                           .mono_ns = mono_ns,
+                           .wall_ns = wall_ns,
+                           .kind = *landed ? "landing" : "takeoff",
+                           .count = 1,
+                           .detail = std::string("EXTENDED_SYS_STATE from system ") + std::to_string(m.sysid) +
+                                     (*landed ? ": landed" : ": no longer landed")});
+    }
+    landed_ = landed;
+  }
 }
 
 void LinkRecorder::store_samples(std::span<const protocol::Sample> samples) {

@@ -38,7 +38,8 @@ class LinkRecorder {
   const MavlinkReference* mavlink_reference() const { return reference_ ? &*reference_ : nullptr; }
 
   // Stores the chunk, the store links of radios heard for the first time, the IMU a lock found, the reference rows,
-  // the samples and the losses. At the end of the stream (chunk.end) it ends this link's recording (end()).
+  // the land detector's takeoffs and landings, the samples and the losses. At the end of the stream (chunk.end) it ends
+  // this link's recording (end()).
   void on_chunk(const DecodedChunk& chunk);
   // The end of this link's recording (the stream's, or the recording's before it: a rotation, a failing store): the
   // reference's last rows, and the decoder's counters since the recording began as an event. Once.
@@ -51,6 +52,7 @@ class LinkRecorder {
   void record_losses(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns);
   void record_lock(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns);
   void record_reference(const LinkDecoder& decoder, std::int64_t mono_ns, bool at_end);
+  void record_land_detector(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns);
   void store_samples(std::span<const protocol::Sample> samples);
 
   store::Store& store_;
@@ -63,6 +65,7 @@ class LinkRecorder {
   std::optional<MavlinkReference> reference_;
   std::vector<store::ReferenceRow> reference_rows_;  // reused
   bool lock_pending_ = false;                        // a lock whose IMU is not yet recorded
+  std::optional<bool> landed_;                       // the autopilot's land detector, when it has spoken
   // The decoder's counts as the recording began, by framing layer, and its frames without a sample.
   std::vector<std::pair<std::string, protocol::DecoderCounters>> counted_before_;
   std::uint64_t without_sample_before_ = 0;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <utility>
 
+#include "pipeline/land_detector.hpp"
+
 namespace imubridge::pipeline {
 
 SessionEngine::SessionEngine(std::unique_ptr<EstimationStage> stage) : stage_(std::move(stage)) {}
@@ -21,6 +23,15 @@ void SessionEngine::on_chunk(std::size_t link, std::span<const std::uint8_t> byt
   LinkDecoder& decoder = decoders_.at(link);
   samples_.clear();
   decoder.feed(bytes, recv_mono_ns, samples_);
+  if (stage_) {
+    // The autopilot's land detector, before the chunk's samples: replay, reading the same chunks, applies it at the
+    // same sample.
+    const auto imu = decoder.mavlink_imu();
+    for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
+      const auto landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
+      if (landed) stage_->set_landed(static_cast<std::uint32_t>(link), *landed);
+    }
+  }
   deliver(link, {.bytes = bytes,
                  .recv_mono_ns = recv_mono_ns,
                  .recv_wall_ns = recv_wall_ns,

@@ -173,9 +173,27 @@ struct LocalPositionNed {
   friend bool operator==(const LocalPositionNed&, const LocalPositionNed&) = default;
 };
 
+// MAV_LANDED_STATE: what an autopilot's land detector says.
+enum class LandedState : std::uint8_t { undefined = 0, on_ground = 1, in_air = 2, takeoff = 3, landing = 4 };
+
+struct ExtendedSysState {
+  static constexpr std::uint32_t kId = 245;
+  static constexpr std::string_view kName = "EXTENDED_SYS_STATE";
+  static constexpr std::size_t kBaseLength = 2, kLength = 2;
+
+  std::uint8_t vtol_state = 0;    // MAV_VTOL_STATE
+  std::uint8_t landed_state = 0;  // MAV_LANDED_STATE (LandedState)
+
+  template <typename Self, typename F>
+  static constexpr void for_each_field(Self& m, F&& f) {
+    f("vtol_state", m.vtol_state), f("landed_state", m.landed_state);
+  }
+  friend bool operator==(const ExtendedSysState&, const ExtendedSysState&) = default;
+};
+
 // The messages that get typed fields; every other id is carried as payload bytes only.
-using Decoded =
-    std::variant<HighresImu, ScaledImu, ScaledImu2, ScaledImu3, RawImu, Attitude, AttitudeQuaternion, LocalPositionNed>;
+using Decoded = std::variant<HighresImu, ScaledImu, ScaledImu2, ScaledImu3, RawImu, Attitude, AttitudeQuaternion,
+                             LocalPositionNed, ExtendedSysState>;
 
 bool is_decoded(std::uint32_t msgid);
 

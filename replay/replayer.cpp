@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "pipeline/estimation_stage.hpp"
+#include "pipeline/land_detector.hpp"
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/radio_link.hpp"
 #include "pipeline/session_config.hpp"
@@ -118,12 +119,25 @@ ReplayResult replay_session(store::Store& store, std::int64_t session_id, const 
   ReplayResult result;
   RunSink run(store, links.rows, result);
   engine.add_sink(run);
+  // An imported log's land detector, stored as takeoff and landing events, at its time on the chunks' clock. A
+  // MAVLink link's own (EXTENDED_SYS_STATE) comes with its bytes, which the engine reads as the live run did: stored
+  // events never override it.
+  pipeline::StoredLandDetector land_detector(store.events(session_id));
+  const auto set_landed = [&](const std::optional<std::int64_t>& link_id, bool landed) {
+    for (const auto& [row, link] : links.by_row) {
+      if ((!link_id || *link_id == row) && engine.decoder(link.index).format() != protocol::WireFormat::mavlink) {
+        engine.stage()->set_landed(static_cast<std::uint32_t>(link.index), landed);
+      }
+    }
+  };
+  if (land_detector.landed_at_start()) set_landed(std::nullopt, true);
   play_chunks(store, session, options.play, [&](const store::Chunk& chunk, double t_s) {
     const auto it = links.by_row.find(chunk.link_id);
     if (it == links.by_row.end()) {
       ++result.chunks_without_link;
       return;
     }
+    for (const auto& change : land_detector.until(chunk.recv_mono_ns)) set_landed(change.link_id, change.landed);
     if (result.run == 0) {  // created with the first chunk: a window without any leaves no empty run behind
       result.run = store.begin_run(
           session_id,

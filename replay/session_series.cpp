@@ -188,6 +188,20 @@ std::optional<std::vector<estimator::TimeWindow>> airborne_from_events(const sto
   return out;
 }
 
+// Where the land detector says the vehicle stood: before its first takeoff, between its flights, after its last
+// landing (everywhere when it never flew).
+std::vector<estimator::TimeWindow> landed_between(const std::vector<estimator::TimeWindow>& airborne) {
+  constexpr double kForever = std::numeric_limits<double>::infinity();
+  std::vector<estimator::TimeWindow> out;
+  double from = -kForever;
+  for (const estimator::TimeWindow& flight : airborne) {
+    if (flight.start > from) out.push_back({from, flight.start});
+    from = std::max(from, flight.end);
+  }
+  if (from < kForever) out.push_back({from, kForever});
+  return out;
+}
+
 // Estimates the delay unless declared, says so, and re-takes every sample's reference velocity at its reception
 // time plus the delay.
 void apply_reference_delay(SessionSeries& out, const Reference& reference, const std::vector<std::int64_t>& recv_ns,
@@ -312,6 +326,7 @@ std::vector<std::int64_t> keep_inside_reference(SessionSeries& out, const Refere
   }
   if (kept.size() == 0)
     throw std::invalid_argument(session_name(session) + ": no sample was received while the reference was recorded");
+  kept.landed = std::move(out.series.landed);  // on the same clock
   out.series = std::move(kept);
   return kept_recv_ns;
 }
@@ -333,6 +348,7 @@ SessionSeries read_session_series(const store::Store& store, std::int64_t sessio
   const std::vector<std::int64_t> recv_mono_ns = read_samples(store, session, out);
   out.flight = estimator::flight_identity(out.series);
   out.airborne = airborne_from_events(store, session, SeriesClock(out.series.t, recv_mono_ns));
+  if (out.airborne) out.series.landed = landed_between(*out.airborne);
   if (options.reference == ReferenceUse::none) {
     to_body_axes(out, declared);
     return out;

@@ -54,13 +54,14 @@ struct SessionSeries {
   // with the reference knows its own flight when it is replayed without one (estimator::for_flight).
   std::string flight;
   SessionSeriesCounts counts;
-  estimator::AxesResolution axes;                                  // how the IMU's axes were turned into the body's
+  estimator::AxesResolution axes;                                    // how the IMU's axes were turned into the body's
   std::optional<estimator::ReferenceAlignment> reference_alignment;  // with a reference: its attitude's frame
-  std::optional<estimator::ReferenceDelay> reference_delay;  // the estimate, when one was made
-  double reference_shift_s = 0.0;  // the reference velocity at sample time t is the reference's at t + this
+  std::optional<estimator::ReferenceDelay> reference_delay;          // the estimate, when one was made
+  double reference_shift_s = 0.0;    // the reference velocity at sample time t is the reference's at t + this
   std::string reference_delay_line;  // "reference delay: ..." for people; empty when the delay was not looked at
   // When the log's own land detector says the vehicle flew (the session's takeoff and landing events, as `import
-  // ulog` stores them), on the series' clock; an open end is infinite. nullopt: the session has no such events.
+  // ulog` stores them), on the series' clock; an open end is infinite. nullopt: the session has no such events. The
+  // spans between them are the series' `landed`.
   std::optional<std::vector<estimator::TimeWindow>> airborne;
   std::vector<std::string> warnings;  // one line each, without a "warning: " prefix: axes mismatch, notes
 };

@@ -136,7 +136,9 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
                                  {"rejected_out_of_range", c.rejected_out_of_range},
                                  {"rejected_time", c.rejected_time},
                                  {"gaps", c.gaps},
-                                 {"clock_restarts", c.clock_restarts}};
+                                 {"clock_restarts", c.clock_restarts},
+                                 {"landed", c.landed},
+                                 {"resets", c.resets}};
   } else {
     // The anchor alone: zero velocity beside it, in the series' axes as the anchor is.
     scored = est::clip(window.value_or(span), session.series.t, "evaluation");

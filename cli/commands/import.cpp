@@ -204,9 +204,12 @@ int run_import_dataflash(const ImportCommandOptions& o) {
   for (const auto& [i, text] : r.imus) imus += (imus.empty() ? "" : "; ") + std::to_string(i) + ": " + text;
   std::fprintf(stderr, "IMU instance %u imported (--imu N picks another); the log's: %s\n", r.instance, imus.c_str());
   print_reference(o, r.reference_rows, r.reference_source, "EKF1, NKF1 or XKF1 (with ATT)");
-  std::fprintf(stderr, "events: %llu MSG, %llu MODE changes, %llu arming changes; %llu parameters in the config\n",
+  std::fprintf(stderr,
+               "events: %llu MSG, %llu MODE changes, %llu arming changes, %llu land detector changes (takeoff, "
+               "landing); %llu parameters in the config\n",
                static_cast<unsigned long long>(r.log_events), static_cast<unsigned long long>(r.mode_changes),
-               static_cast<unsigned long long>(r.arming_changes), static_cast<unsigned long long>(r.params));
+               static_cast<unsigned long long>(r.arming_changes),
+               static_cast<unsigned long long>(r.land_detector_changes), static_cast<unsigned long long>(r.params));
   print_end(r.gaps, problems, r.session);
   return 0;
 }

@@ -472,6 +472,118 @@ TEST(DragVelocityEstimator, WithoutDragOnAnAxisReadsRestThereAsSureAsThePrior) {
   EXPECT_TRUE(rn.estimates.back().v.array().isNaN().all());
 }
 
+// ---- On the ground (set_landed: the autopilot's land detector) ----
+
+// A vehicle standing still at `stance` (body -> NED) for `duration` s from `t0`, read by flight_params()'s IMU: gravity
+// through the stance and the mounting, the accelerometer's bias, and fly()'s gyro bias, with fly()'s noise.
+std::vector<ImuSample> stand(const Eigen::Matrix3d& stance, double t0, double duration, unsigned seed) {
+  const FullModelParams p = flight_params();
+  const Eigen::Matrix3d imu_to_body = Eigen::AngleAxisd(p.mounting.norm(), p.mounting.normalized()).toRotationMatrix();
+  const Eigen::Vector3d accel =
+      imu_to_body.transpose() * stance.transpose() * Eigen::Vector3d(0, 0, -kGravity) + p.accel_bias;
+  const Eigen::Vector3d gyro(0.01, -0.008, 0.0);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::vector<ImuSample> out;
+  for (int k = 0; k * kH < duration; ++k) {
+    out.push_back({t0 + k * kH, gyro + kGyroStd * Eigen::Vector3d(normal(rng), normal(rng), normal(rng)),
+                   accel + kAccelStd * Eigen::Vector3d(normal(rng), normal(rng), normal(rng))});
+  }
+  return out;
+}
+
+// On its legs, a vehicle's horizontal accelerometers read the stance's tilt, not drag; the drag law reads that as a
+// speed. Landed, the filter reads rest, as sure as it is, whatever the tilt.
+TEST(DragVelocityEstimator, LandedItReadsRestWhereTheDragLawReadsTheStancesTiltAsASpeed) {
+  // Standing 3 degrees rolled on uneven ground: 0.51 m/s^2 of gravity on y, 1.3 m/s through k_y = 0.4 1/s.
+  const Eigen::Matrix3d stance = Eigen::AngleAxisd(0.05, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const std::vector<ImuSample> samples = stand(stance, 0.0, 30.0, 31);
+  DragVelocityEstimator told(flight_params(), flight_config());
+  told.set_landed(true);
+  EXPECT_TRUE(told.landed());
+  DragVelocityEstimator untold(flight_params(), flight_config());
+  const Estimates landed = run(told, samples);
+  const Estimates flying = run(untold, samples);
+  ASSERT_FALSE(landed.estimates.empty());
+  EXPECT_EQ(told.counters().landed, landed.estimates.size());
+  EXPECT_EQ(untold.counters().landed, 0u);
+  EXPECT_GT(std::abs(flying.estimates.back().v.y()), 0.8);  // the mechanism off: a phantom speed
+  for (std::size_t i = landed.estimates.size() / 10; i < landed.estimates.size(); ++i) {
+    const DragVelocityEstimate& e = landed.estimates[i];
+    ASSERT_LT(e.v.cwiseAbs().maxCoeff(), 0.02) << e.t;
+    ASSERT_LT(e.v_var.maxCoeff(), 0.05 * 0.05) << e.t;  // no surer than the legs hold it, and far surer than the drag
+    ASSERT_GT(e.v_var.minCoeff(), 0.0) << e.t;
+  }
+}
+
+// Landed until take-off, the flight starts from rest with the tilt levelled on the accelerometer and the gyro bias
+// learnt; a filter that read the stance as drag takes off with a phantom speed and a tilt to unlearn.
+TEST(DragVelocityEstimator, TakesOffFromRestWhenTheGroundWasFusedAsRest) {
+  const Flight flight = fly(20.0, 32);
+  const double ground = 20.0;  // s on the ground before the flight, at the flight's first attitude
+  std::vector<ImuSample> samples = stand(attitude(0.0), 0.0, ground, 33);
+  const std::size_t takeoff = samples.size();
+  for (ImuSample s : flight.samples) {
+    s.t += ground;
+    samples.push_back(s);
+  }
+  const auto flight_error = [&](bool land_detector) {
+    DragVelocityEstimator estimator(flight_params(), flight_config());
+    estimator.set_landed(land_detector);
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    int n = 0;
+    for (std::size_t k = 0; k < samples.size(); ++k) {
+      if (k == takeoff) estimator.set_landed(false);
+      const auto e = estimator.update(samples[k]);
+      const std::size_t described = k - static_cast<std::size_t>(estimator.delay_samples());
+      if (!e || described < takeoff || e->t >= ground + 5.0) continue;  // the flight's first 5 s
+      sum += (e->v - flight.body_velocity[described - takeoff]).cwiseAbs2();
+      ++n;
+    }
+    return std::sqrt(sum.sum() / n);
+  };
+  const double from_rest = flight_error(true);
+  const double from_phantom = flight_error(false);
+  std::printf("first 5 s of flight: velocity RMSE %.3f m/s landed on the ground, %.3f m/s without\n", from_rest,
+              from_phantom);
+  EXPECT_LT(from_rest, 0.5 * from_phantom);
+}
+
+// A crash: 2 s of tumbling at 50 Hz (rates up to 30 rad/s, specific force up to 12 g, as ArduCopter's log171 ends).
+// The filter's covariance loses its positive definiteness there and its state turns NaN, for good; it must instead
+// notice, start again from level and rest (knowing nothing of the velocity, and saying so), and read the flight after.
+TEST(DragVelocityEstimator, AfterACrashThatWreckedItsStateItStartsAgainInsteadOfStayingNaN) {
+  const Flight flight = fly(40.0, 34);
+  std::mt19937 rng(35);
+  std::uniform_real_distribution<double> rate(-30.0, 30.0), force(-12.0 * kGravity, 12.0 * kGravity);
+  std::vector<ImuSample> samples(flight.samples.begin(), flight.samples.begin() + 2000);  // 10 s of flight
+  const double crash_end = 12.0;
+  for (double t = 10.0; t < crash_end; t += 0.02) {
+    samples.push_back(
+        {t, Eigen::Vector3d(rate(rng), rate(rng), rate(rng)), Eigen::Vector3d(force(rng), force(rng), force(rng))});
+  }
+  for (std::size_t k = 2400; k < flight.samples.size(); ++k) samples.push_back(flight.samples[k]);  // 12 s on
+  DragVelocityEstimator estimator(flight_params(), flight_config());
+  Eigen::Vector2d late_error = Eigen::Vector2d::Zero();
+  int late = 0;
+  for (const ImuSample& s : samples) {
+    const auto e = estimator.update(s);
+    if (!e) continue;
+    ASSERT_TRUE(e->v.allFinite()) << e->t;
+    ASSERT_TRUE((e->v_var.array() > 1e-8).all()) << e->t;  // never sure of a velocity it cannot know
+    if (e->t >= 30.0) {
+      const std::size_t k = static_cast<std::size_t>(std::lround(e->t / kH));
+      late_error += (e->v - flight.body_velocity[k]).cwiseAbs2();
+      ++late;
+    }
+  }
+  EXPECT_GE(estimator.counters().resets, 1u);
+  ASSERT_GT(late, 0);
+  std::printf("%llu resets; velocity RMSE from 18 s after the crash %.3f m/s\n",
+              static_cast<unsigned long long>(estimator.counters().resets), std::sqrt(late_error.sum() / late));
+  EXPECT_LT(std::sqrt(late_error.sum() / late), 0.5);  // 18 s after the crash it reads the flight again
+}
+
 TEST(DragVelocityEstimator, RefusesBadParamsAndConfigs) {
   FullModelParams p = flight_params();
   p.drag_linear.x() = -0.1;
@@ -481,6 +593,9 @@ TEST(DragVelocityEstimator, RefusesBadParamsAndConfigs) {
   EXPECT_THROW(DragVelocityEstimator(flight_params(), c), std::invalid_argument);
   c = DragVelocityConfig{};
   c.accel_noise = 0.0;
+  EXPECT_THROW(DragVelocityEstimator(flight_params(), c), std::invalid_argument);
+  c = DragVelocityConfig{};
+  c.landed_speed_std = 0.0;
   EXPECT_THROW(DragVelocityEstimator(flight_params(), c), std::invalid_argument);
   c = DragVelocityConfig{};
   c.max_rate = std::nan("");

@@ -113,8 +113,9 @@ class Writer {
 
 // ArduCopter 3.3's layout, timed in ms: IMU and IMU2 at 50 Hz for 2 s from 10 s with a hole of 1.02 s in the middle
 // (the IMU's 50th sample at 10.98 s, the 51st at 12.0 s), EKF1 at 10 Hz flying north at 1 m/s with yaw 90 deg, a MODE
-// change, EV armed (untimed: the time of the record before it), MSG, PARM at the start and one change, and a GPS whose
-// TimeMS (GPS time of week, not boot time) must not time the records after it.
+// change, EV armed (untimed: the time of the record before it), the land detector's takeoff and landing (EV 28, 18),
+// MSG, PARM at the start and one change, and a GPS whose TimeMS (GPS time of week, not boot time) must not time the
+// records after it.
 constexpr std::uint32_t kOldT0Ms = 10'000;
 constexpr std::size_t kOldSamples = 100;
 std::uint32_t old_imu_ms(std::size_t i) {
@@ -148,6 +149,8 @@ Writer old_log() {
       w.record(170, {t, 5.0, 5.0});
       w.record(13, {10.0});  // armed, timed by the GPS record before it were its TimeMS boot time
     }
+    if (i == 20) w.record(13, {28.0});  // the land detector: no longer landed (timed by this IMU2 record)
+    if (i == 80) w.record(13, {18.0});  // and landed again
     if (i == 60) w.record(129, {std::string("ANGLE_MAX"), 3000.0});
   }
   return w;
@@ -394,6 +397,15 @@ TEST_F(DataflashImport, SamplesReferenceEventsParametersAndHolesOfAnOlderLog) {
   EXPECT_EQ(r.log_events, 1u);
   EXPECT_EQ(r.mode_changes, 1u);
   EXPECT_EQ(r.arming_changes, 1u);
+  const auto takeoff = stored_events(store, r.session, "takeoff");
+  const auto landing = stored_events(store, r.session, "landing");
+  ASSERT_EQ(takeoff.size(), 1u);
+  ASSERT_EQ(landing.size(), 1u);
+  EXPECT_EQ(takeoff[0].detail, "the land detector: no longer landed (EV 28, NOT_LANDED)");
+  EXPECT_EQ(takeoff[0].mono_ns, static_cast<std::int64_t>(old_imu_ms(20)) * 1'000'000);
+  EXPECT_EQ(landing[0].detail, "the land detector: landed (EV 18, LAND_COMPLETE)");
+  EXPECT_EQ(landing[0].mono_ns, static_cast<std::int64_t>(old_imu_ms(80)) * 1'000'000);
+  EXPECT_EQ(r.land_detector_changes, 2u);
 
   // The hole: from the 50th sample at 10.98 s to the 51st at 12.0 s, 1.02 s over the default 0.5 s.
   ASSERT_EQ(r.gaps.holes.size(), 1u);

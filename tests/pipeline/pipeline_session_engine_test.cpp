@@ -14,6 +14,7 @@
 #include "pipeline/recorded_session.hpp"
 #include "pipeline/session_config.hpp"
 #include "pipeline/session_engine.hpp"
+#include "protocol/mavlink_messages.hpp"
 #include "sim/frame_encoder.hpp"
 #include "sim/scenario.hpp"
 #include "store/store.hpp"
@@ -291,6 +292,99 @@ TEST(SessionEngine, ARemovedSinkHearsNothingMore) {
   for (std::size_t i = 1; i < chunks.size(); ++i) engine.on_chunk(0, chunks[i], 0, 0);
   EXPECT_EQ(removed.bytes, heard);
   EXPECT_GT(kept.bytes, heard);
+}
+
+// An autopilot standing 3 degrees rolled, its HIGHRES_IMU at 200 Hz for 20 s, one frame per chunk, and its land
+// detector (EXTENDED_SYS_STATE, every 0.5 s): on the ground for 10 s, then in the air (still reading the stance: the
+// drag law then reads its tilt as a speed). Another vehicle (system 2) on the same link says it is on the ground
+// throughout; its detector is not this IMU's.
+std::vector<std::vector<std::uint8_t>> standing_autopilot_chunks() {
+  namespace mav = protocol::mavlink;
+  const double g = 9.80665, roll = 0.05;
+  std::vector<std::vector<std::uint8_t>> chunks;
+  std::uint8_t seq = 0;
+  for (std::uint32_t i = 0; i < 4000; ++i) {
+    auto& chunk = chunks.emplace_back();
+    mav::encode(mav::make_message(mav::HighresImu{.time_usec = 5000ull * i,
+                                                  .xacc = 0.0f,
+                                                  .yacc = static_cast<float>(-g * std::sin(roll)),
+                                                  .zacc = static_cast<float>(-g * std::cos(roll))},
+                                  {.seq = seq++}),
+                chunk);
+    if (i % 100 == 50) {
+      const auto state = i < 2000 ? mav::LandedState::on_ground : mav::LandedState::in_air;
+      mav::encode(
+          mav::make_message(mav::ExtendedSysState{.landed_state = static_cast<std::uint8_t>(state)}, {.seq = seq++}),
+          chunk);
+      mav::encode(mav::make_message(
+                      mav::ExtendedSysState{.landed_state = static_cast<std::uint8_t>(mav::LandedState::on_ground)},
+                      {.sysid = 2}),
+                  chunk);
+    }
+  }
+  return chunks;
+}
+
+// The land detector a MAVLink link carries holds its estimates at rest while it says landed, and is recorded as the
+// session's takeoff; without it (the same IMU frames alone) the stance reads as a speed.
+TEST(SessionEngine, AnAutopilotsLandDetectorHoldsItsLinksVelocityAtRestAndIsRecorded) {
+  const auto chunks = standing_autopilot_chunks();
+  const SessionLink link{.recorded = {.name = "fc",
+                                      .format = protocol::WireFormat::mavlink,
+                                      .imu_axes = "frd",
+                                      .mavlink_imu_lock = MavlinkImuLock{}},
+                         .device = "test"};
+  const auto run = [&](bool with_detector, store::Store* store) {
+    SessionEngine engine(std::make_unique<EstimationStage>(paper_params(), StageAxes{.others = estimator::frd_axes()}));
+    engine.add_link(make_decoder(link.recorded));
+    std::vector<std::string> log;
+    Recorder sink("a", &log);
+    engine.add_sink(sink);
+    std::optional<RecordedSession> recorded;
+    std::optional<SessionRecording> recording;
+    if (store) {
+      recorded = begin_recorded_session(*store, {.kind = "live", .source = "test", .config = nlohmann::json::object()},
+                                        {link});
+      recording.emplace(*store, *recorded, std::vector<SessionLink>{link}, engine);
+      engine.add_sink(*recording);
+    }
+    std::int64_t t = 0;
+    for (const auto& chunk : chunks) {
+      t += 5'000'000;
+      // Without the detector: the IMU frame alone, the chunk's first.
+      const std::size_t imu_frame = chunk[0] == 0xFD ? 12u + chunk[1] : 8u + chunk[1];
+      engine.on_chunk(0, with_detector ? std::span(chunk) : std::span(chunk).first(imu_frame), t, t);
+    }
+    engine.finish_link(0, t, t);
+    engine.finish();
+    if (store) end_recorded_session(*store, recorded->id, t);
+    return sink.estimates;
+  };
+  test::TempDir dir;
+  store::Store store(dir / "s.db");
+  const std::vector<store::Estimate> told = run(true, &store);
+  const std::vector<store::Estimate> untold = run(false, nullptr);
+  ASSERT_EQ(told.size(), untold.size());
+  ASSERT_GT(told.size(), 3900u);
+  std::size_t on_ground = 0;
+  for (std::size_t i = 0; i < told.size(); ++i) {
+    const store::Estimate& e = told[i];
+    if (e.t_s > 1.0 && e.t_s < 10.0) {  // from the first detector message to take-off
+      ++on_ground;
+      ASSERT_LT(std::hypot(e.vx, e.vy), 0.02) << e.t_s;
+      ASSERT_LT(e.var_vy, 0.05 * 0.05) << e.t_s;
+      ASSERT_GT(std::abs(untold[i].vy), 0.5) << e.t_s;  // the mechanism off: the stance read as a speed
+    }
+  }
+  EXPECT_GT(on_ground, 1500u);
+  EXPECT_GT(std::abs(told.back().vy), 0.5);  // in the air, by the detector's word: the drag law reads again
+  std::vector<store::Event> detector;
+  for (const store::Event& e : store.events(1)) {
+    if (e.kind == "takeoff" || e.kind == "landing") detector.push_back(e);
+  }
+  ASSERT_EQ(detector.size(), 1u);  // system 2's "on the ground" is not this IMU's
+  EXPECT_EQ(detector[0].kind, "takeoff");
+  EXPECT_EQ(detector[0].mono_ns, 2051LL * 5'000'000);  // the chunk that carried the first "in the air"
 }
 
 }  // namespace

@@ -1089,8 +1089,11 @@ TEST(MavlinkClock, ReadOffThePayloadItIsTheDecodedMessagesOwn) {
         []<typename M>(const M& m) -> std::uint64_t {
           if constexpr (requires { m.time_usec; }) {
             return m.time_usec;
-          } else {
+          } else if constexpr (requires { m.time_boot_ms; }) {
             return std::uint64_t{m.time_boot_ms} * 1000;
+          } else {
+            ADD_FAILURE() << M::kName << " has no clock";
+            return 0;
           }
         },
         message);
@@ -1100,6 +1103,20 @@ TEST(MavlinkClock, ReadOffThePayloadItIsTheDecodedMessagesOwn) {
   EXPECT_EQ(clock_field(Attitude::kId)->to_us, 1000u);
   EXPECT_NE(clock_field(HighresImu::kId)->slot, clock_field(Attitude::kId)->slot);
   EXPECT_FALSE(clock_field(0).has_value());  // HEARTBEAT: no clock
+  EXPECT_FALSE(clock_field(ExtendedSysState::kId).has_value());
+}
+
+// The autopilot's land detector: both bytes read back; a MAVLink 2 sender truncates a landed_state of 0 (undefined)
+// away, which reads back as 0.
+TEST(MavlinkExtendedSysState, CarriesTheLandDetectorsState) {
+  for (const auto state : {LandedState::undefined, LandedState::on_ground, LandedState::in_air, LandedState::landing}) {
+    const ExtendedSysState sent{.vtol_state = 0, .landed_state = static_cast<std::uint8_t>(state)};
+    const Message m = make_message(sent, {});
+    EXPECT_EQ(m.msgid, 245u);
+    const std::optional<Decoded> back = decode(m);
+    ASSERT_TRUE(back.has_value());
+    EXPECT_EQ(std::get<ExtendedSysState>(*back), sent);
+  }
 }
 
 }  // namespace

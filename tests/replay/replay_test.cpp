@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -175,6 +176,51 @@ TEST_F(Replay, GivenParamsOverrideTheLiveRunsAndAreRecorded) {
   std::size_t different = 0;
   for (std::size_t i = 0; i < live.size(); ++i) different += live[i].vx != replayed[i].vx;
   EXPECT_GT(different, live.size() / 2);
+}
+
+// An imported log's land detector (import ulog stores PX4's as the session's takeoff and landing events): replay fuses
+// rest while it says landed, and the drag law between; the same session without the events reads the drag throughout.
+// A MAVLink link's detector is in its bytes: stored events never override them, so its replay stays its live run's.
+TEST_F(Replay, AStoredLandDetectorHoldsTheVelocityAtRestOnTheGroundExceptWhereTheBytesCarryTheirOwn) {
+  store::Store store(path_);
+  const Stream stream = serial_stream(WireFormat::imubridge, 4.0, false);
+  const auto plain = record(store, WireFormat::imubridge, stream, {});
+  const auto detected = record(store, WireFormat::imubridge, stream, {});
+  const auto event = [&](std::int64_t session, double t, const char* kind) {
+    const std::int64_t mono = kMonoAtStart + std::llround(t * 1e9);
+    store.append_event(session, {.mono_ns = mono, .wall_ns = kWallAtStart + mono - kMonoAtStart, .kind = kind});
+  };
+  event(detected.session, 3.0, "landing");  // stored out of order: replay sorts them
+  event(detected.session, 1.5, "takeoff");
+  const auto without = estimates_by_link(store, replay_session(store, plain.session, {.params = paper_params()}).run);
+  const auto with = estimates_by_link(store, replay_session(store, detected.session, {.params = paper_params()}).run);
+  ASSERT_EQ(without.size(), 1u);
+  ASSERT_EQ(with.size(), 1u);
+  const auto& a = without.begin()->second;
+  const auto& b = with.begin()->second;
+  ASSERT_EQ(a.size(), b.size());
+  double ground_speed_without = 0.0, air_speed = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].t_s, b[i].t_s);
+    const double t = b[i].t_s;
+    if (t < 1.45 || t > 3.1) {  // landed: before the takeoff (the first event) and after the landing
+      ASSERT_LT(std::hypot(b[i].vx, b[i].vy), 0.05) << t;
+      ASSERT_LT(b[i].var_vx, 0.05 * 0.05) << t;
+      ground_speed_without = std::max(ground_speed_without, std::hypot(a[i].vx, a[i].vy));
+    } else if (t > 1.6 && t < 2.9) {
+      air_speed = std::max(air_speed, std::hypot(b[i].vx, b[i].vy));
+      EXPECT_GT(b[i].var_vx, 0.05 * 0.05) << t;  // the drag law's uncertainty again
+    }
+  }
+  EXPECT_GT(ground_speed_without, 0.2);  // the simulated vehicle moves: without the events, the drag reads it
+  EXPECT_GT(air_speed, 0.05);  // in the air it reads the drag again (from rest): no longer held within 0.05 m/s
+  std::printf("largest speed on the ground without the events %.2f m/s; in the air with them %.2f m/s\n",
+              ground_speed_without, air_speed);
+
+  const auto mavlink =
+      record(store, WireFormat::mavlink, serial_stream(WireFormat::mavlink, 2.0, false), paper_params());
+  event(mavlink.session, 1.0, "takeoff");
+  expect_identical_runs(store, *mavlink.live_run, replay_session(store, mavlink.session).run);
 }
 
 TEST_F(Replay, WindowReplaysTheChunksReceivedInItFromTheSessionsStart) {

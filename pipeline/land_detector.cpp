@@ -1,0 +1,35 @@
+#include "pipeline/land_detector.hpp"
+
+#include <algorithm>
+#include <variant>
+
+#include "protocol/mavlink_messages.hpp"
+
+namespace imubridge::pipeline {
+
+std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m, std::optional<std::uint8_t> imu_system) {
+  namespace mavlink = protocol::mavlink;
+  if (m.msgid != mavlink::ExtendedSysState::kId || !imu_system || m.sysid != *imu_system) return std::nullopt;
+  const std::optional<mavlink::Decoded> decoded = mavlink::decode(m);
+  const auto* state = decoded ? std::get_if<mavlink::ExtendedSysState>(&*decoded) : nullptr;
+  if (!state) return std::nullopt;
+  return state->landed_state == static_cast<std::uint8_t>(mavlink::LandedState::on_ground);
+}
+
+StoredLandDetector::StoredLandDetector(std::span<const store::Event> events) {
+  for (const store::Event& e : events) {
+    if (e.kind == "takeoff" || e.kind == "landing") events_.push_back(e);
+  }
+  std::stable_sort(events_.begin(), events_.end(),
+                   [](const store::Event& a, const store::Event& b) { return a.mono_ns < b.mono_ns; });
+}
+
+std::vector<StoredLandDetector::Change> StoredLandDetector::until(std::int64_t mono_ns) {
+  std::vector<Change> out;
+  for (; next_ < events_.size() && events_[next_].mono_ns <= mono_ns; ++next_) {
+    out.push_back({events_[next_].link_id, events_[next_].kind == "landing"});
+  }
+  return out;
+}
+
+}  // namespace imubridge::pipeline
