@@ -291,6 +291,11 @@ void Daemon::on_data(Link& link, std::span<const std::uint8_t> bytes) {
       spdlog::info("link '{}': samples from {} only: the first IMU heard{}", link.config.name,
                    protocol::mavlink::describe(*imu), link.config.imu ? " of those 'imu' names" : "");
     }
+    for (const auto& change : link.land_detector.after(decoder)) {
+      spdlog::info(
+          "link '{}': the autopilot (system {}) says {}", link.config.name, change.system,
+          change.landed ? "landed: the velocity is held at rest" : "no longer landed: the velocity is the drag's");
+    }
   }
   record([&](Recording& r) { commits_ += r.store.commit_if_due(Clock::now()); });
 }

@@ -17,6 +17,7 @@
 #include "daemon/daemon.hpp"
 #include "daemon/serial_link.hpp"
 #include "daemon/vehicle_feedback.hpp"
+#include "pipeline/land_detector.hpp"
 #include "pipeline/link_recorder.hpp"
 #include "pipeline/session_engine.hpp"
 #include "store/store.hpp"
@@ -74,6 +75,7 @@ struct Daemon::Link {
   std::uint64_t samples = 0, estimates = 0, tx_chunks = 0;
   std::optional<std::int64_t> lost_at_ns;
   std::optional<protocol::mavlink::ImuSource> logged_imu;  // the IMU a MAVLink link locked on, once logged
+  pipeline::MavlinkLandDetectorChanges land_detector;      // logged as it changes
   // A MAVLink link's vehicle (system, component) once heard: the IMU's sender, else the first other than us. Stream
   // requests target it; before it is heard they are broadcast (0, 0).
   std::optional<std::pair<std::uint8_t, std::uint8_t>> vehicle;

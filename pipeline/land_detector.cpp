@@ -16,6 +16,18 @@ std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m, std::opt
   return state->landed_state == static_cast<std::uint8_t>(mavlink::LandedState::on_ground);
 }
 
+std::vector<MavlinkLandDetectorChanges::Change> MavlinkLandDetectorChanges::after(const LinkDecoder& decoder) {
+  std::vector<Change> out;
+  const auto imu = decoder.mavlink_imu();
+  for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
+    const std::optional<bool> landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
+    if (!landed) continue;
+    if (landed_ && *landed_ != *landed) out.push_back({*landed, m.sysid});
+    landed_ = landed;
+  }
+  return out;
+}
+
 StoredLandDetector::StoredLandDetector(std::span<const store::Event> events) {
   for (const store::Event& e : events) {
     if (e.kind == "takeoff" || e.kind == "landing") events_.push_back(e);

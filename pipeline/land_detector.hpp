@@ -9,6 +9,7 @@
 #include <span>
 #include <vector>
 
+#include "pipeline/link_decoder.hpp"
 #include "protocol/mavlink.hpp"
 #include "store/records.hpp"
 
@@ -19,6 +20,21 @@ namespace imubridge::pipeline {
 // (moving) and when the detector does not know (undefined: rest is never assumed). nullopt for any other message,
 // and before the link knows its IMU.
 std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m, std::optional<std::uint8_t> imu_system);
+
+// One MAVLink link's land detector as it changes its mind: what the recording stores as takeoff and landing events and
+// the daemon logs. The first state heard is where it starts, not a change.
+class MavlinkLandDetectorChanges {
+ public:
+  struct Change {
+    bool landed = false;
+    std::uint8_t system = 0;  // the autopilot's
+  };
+  // The changes among `decoder`'s last messages (mavlink_landed: its IMU's system's), in order.
+  std::vector<Change> after(const LinkDecoder& decoder);
+
+ private:
+  std::optional<bool> landed_;
+};
 
 // A session's stored land-detector events in time order, replayed against the chunks' receive times.
 class StoredLandDetector {

@@ -2,7 +2,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include "pipeline/land_detector.hpp"
 #include "pipeline/radio_link.hpp"
 
 namespace imubridge::pipeline {
@@ -115,21 +114,14 @@ void LinkRecorder::record_lock(const LinkDecoder& decoder, std::int64_t mono_ns,
 // `import ulog` stores PX4's: what `--in-flight` and `evaluate` read the flight from. Replay needs none: the engine
 // reads the same messages from the same chunks.
 void LinkRecorder::record_land_detector(const LinkDecoder& decoder, std::int64_t mono_ns, std::int64_t wall_ns) {
-  const auto imu = decoder.mavlink_imu();
-  for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
-    const std::optional<bool> landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
-    if (!landed) continue;
-    if (landed_ && *landed_ != *landed) {
-      store_.append_event(session_,
-                          {.link_id = row_,
-                           .mono_ns = mono_ns,
-                           .wall_ns = wall_ns,
-                           .kind = *landed ? "landing" : "takeoff",
-                           .count = 1,
-                           .detail = std::string("EXTENDED_SYS_STATE from system ") + std::to_string(m.sysid) +
-                                     (*landed ? ": landed" : ": no longer landed")});
-    }
-    landed_ = landed;
+  for (const auto& change : land_detector_.after(decoder)) {
+    store_.append_event(session_, {.link_id = row_,
+                                   .mono_ns = mono_ns,
+                                   .wall_ns = wall_ns,
+                                   .kind = change.landed ? "landing" : "takeoff",
+                                   .count = 1,
+                                   .detail = "EXTENDED_SYS_STATE from system " + std::to_string(change.system) +
+                                             (change.landed ? ": landed" : ": no longer landed")});
   }
 }
 

@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "pipeline/land_detector.hpp"
 #include "pipeline/link_decoder.hpp"
 #include "pipeline/mavlink_reference.hpp"
 #include "pipeline/recorded_session.hpp"
@@ -65,7 +66,7 @@ class LinkRecorder {
   std::optional<MavlinkReference> reference_;
   std::vector<store::ReferenceRow> reference_rows_;  // reused
   bool lock_pending_ = false;                        // a lock whose IMU is not yet recorded
-  std::optional<bool> landed_;                       // the autopilot's land detector, when it has spoken
+  MavlinkLandDetectorChanges land_detector_;
   // The decoder's counts as the recording began, by framing layer, and its frames without a sample.
   std::vector<std::pair<std::string, protocol::DecoderCounters>> counted_before_;
   std::uint64_t without_sample_before_ = 0;

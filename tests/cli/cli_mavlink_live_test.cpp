@@ -2,7 +2,10 @@
 // two IMUs (SCALED_IMU2 and HIGHRES_IMU, different values), ATTITUDE and LOCAL_POSITION_NED; the daemon must keep
 // to one IMU, record it so replay decodes the same samples, and write nothing to the port.
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
 #include <bit>
+#include <cmath>
 #include <fstream>
 #include <set>
 
@@ -176,6 +179,57 @@ TEST_F(MavlinkLiveTest, ALinkLocksOnTheFirstImuItHears) {
             1);
   expect_replay_reproduces(db_);
   expect_reference_is_truth(store, vehicle.truth);
+}
+
+// The autopilot's land detector (EXTENDED_SYS_STATE every 40 frames: on the ground for the first half, then in the
+// air): the daemon logs the take-off, stores it as an event, and while landed the velocity is measured rest even with
+// nothing identified (after it: NaN, no drag to read); a replay gives the same velocities from the same bytes.
+TEST_F(MavlinkLiveTest, TheAutopilotsLandDetectorIsLoggedStoredAndHoldsTheVelocityAtRest) {
+  const Vehicle vehicle = vehicle_frames(400);
+  sim::MavlinkTelemetry autopilot;
+  std::vector<std::vector<std::uint8_t>> frames;
+  for (std::size_t i = 0; i < vehicle.frames.size(); ++i) {
+    frames.push_back(vehicle.frames[i]);
+    if (i % 40 == 20) {
+      const auto state = i < vehicle.frames.size() / 2 ? mav::LandedState::on_ground : mav::LandedState::in_air;
+      frames.push_back(autopilot.frame(mav::ExtendedSysState{.landed_state = static_cast<std::uint8_t>(state)}));
+    }
+  }
+  write_config("");
+  record(frames, samples_of(frames, mav::ScaledImu2::kId).size());
+  EXPECT_EQ(count_of(log_, "link 'fc': the autopilot (system 1) says no longer landed"), 1) << log_;
+  EXPECT_EQ(count_of(log_, "says landed"), 0) << log_;
+
+  const store::Store store(db_, {.read_only = true});
+  const auto events = store.events(1);
+  EXPECT_EQ(std::count_if(events.begin(), events.end(), [](const store::Event& e) { return e.kind == "takeoff"; }), 1);
+  EXPECT_EQ(std::count_if(events.begin(), events.end(), [](const store::Event& e) { return e.kind == "landing"; }), 0);
+  const auto velocities = [&](std::int64_t run) {
+    std::vector<std::array<double, 3>> out;
+    store.for_each_estimate(run, [&](const store::Estimate& e) { out.push_back({e.t_s, e.vx, e.var_vx}); });
+    return out;
+  };
+  const auto live = velocities(store.runs(1).at(0).id);
+  std::size_t at_rest = 0;
+  for (const auto& [t, vx, var] : live) at_rest += std::abs(vx) < 0.05 && var < 0.05 * 0.05;
+  EXPECT_GT(at_rest, 50u);
+  ASSERT_FALSE(live.empty());
+  EXPECT_TRUE(std::isnan(live.back()[1]));  // in the air, with no drag identified: unknown
+  const auto replay = run_imubridge("replay --db " + db_.string() + " --session 1");
+  ASSERT_EQ(replay.exit_code, 0) << replay.err;
+  const store::Store replayed_store(db_, {.read_only = true});
+  const auto runs = replayed_store.runs(1);
+  ASSERT_EQ(runs.size(), 2u);
+  std::vector<std::array<double, 3>> replayed;
+  replayed_store.for_each_estimate(runs[1].id, [&](const store::Estimate& e) {
+    replayed.push_back({e.t_s, e.vx, e.var_vx});
+  });
+  ASSERT_EQ(replayed.size(), live.size());
+  for (std::size_t i = 0; i < live.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_TRUE(live[i][k] == replayed[i][k] || (std::isnan(live[i][k]) && std::isnan(replayed[i][k]))) << i;
+    }
+  }
 }
 
 // `imu = "HIGHRES_IMU"`: only its samples, although SCALED_IMU2 came first.
