@@ -83,10 +83,7 @@ DragVelocityEstimator::DragVelocityEstimator(const FullModelParams& params, cons
   process_density_ << square(config.accel_process_noise), square(config.accel_process_noise), square(config.gyro_noise),
       square(config.gyro_noise), square(config.gyro_bias_walk), square(config.gyro_bias_walk);
   // x_ starts level, at rest and unbiased, as a quadrotor on the ground is; the covariance says how sure that is.
-  Vector6d initial_std;
-  initial_std << config.initial_velocity_std, config.initial_velocity_std, config.initial_tilt_std,
-      config.initial_tilt_std, config.initial_gyro_bias_std, config.initial_gyro_bias_std;
-  p_ = initial_std.array().square().matrix().asDiagonal();
+  p_ = initial_covariance(config.initial_velocity_std);
   if (params_.time_offset != 0.0) ring_.resize(kAlignerCapacity);
   windy_ = params_.wind != Eigen::Vector2d::Zero();
   heading_cos_ = std::cos(params_.wind_heading);
@@ -241,6 +238,13 @@ void DragVelocityEstimator::weigh_against_rest(int axis, DragVelocityEstimate& o
   out.v_var[axis] = known * rest / (rest + known);
 }
 
+DragVelocityEstimator::Matrix6d DragVelocityEstimator::initial_covariance(double velocity_std) const {
+  Vector6d std;
+  std << velocity_std, velocity_std, config_.initial_tilt_std, config_.initial_tilt_std, config_.initial_gyro_bias_std,
+      config_.initial_gyro_bias_std;
+  return std.array().square().matrix().asDiagonal();
+}
+
 bool DragVelocityEstimator::diverged() const {
   // No velocity is ever known to a tenth of a millimetre per second (the legs' own is 0.05 m/s): a variance below is
   // the covariance losing its positive definiteness, a step before it turns NaN and never recovers.
@@ -253,10 +257,7 @@ void DragVelocityEstimator::reset_after_divergence(DragVelocityEstimate& out) {
   ++counters_.resets;
   // Level, at rest and unbiased, as at the start: whatever wrecked the covariance wrecked every state with it.
   x_.setZero();
-  Vector6d std;
-  std << config_.rest_speed_std, config_.rest_speed_std, config_.initial_tilt_std, config_.initial_tilt_std,
-      config_.initial_gyro_bias_std, config_.initial_gyro_bias_std;
-  p_ = std.array().square().matrix().asDiagonal();
+  p_ = initial_covariance(config_.rest_speed_std);
   for (int axis = 0; axis < 2; ++axis) {
     if (landed_) {
       out.v[axis] = x_[axis];

@@ -168,6 +168,8 @@ class DragVelocityEstimator {
   // Pairs the accelerometer with the gyro of time_offset earlier: delays the gyro (time_offset > 0) or the
   // accelerometer (< 0) through a ring. False while the ring does not reach back far enough.
   bool align(ImuSample& sample);
+  // The covariance of a filter that starts level and unbiased (config's initial stds), its velocity this unsure.
+  Matrix6d initial_covariance(double velocity_std) const;
   // Whether the filter has lost itself (DragVelocityCounters::resets).
   bool diverged() const;
   // Starts the state again from level and rest, the velocity as unknown as the prior, and writes that into `out`.

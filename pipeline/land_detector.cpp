@@ -7,9 +7,10 @@
 
 namespace imubridge::pipeline {
 
-std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m, std::optional<std::uint8_t> imu_system) {
+std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m,
+                                   const std::optional<protocol::mavlink::ImuSource>& imu) {
   namespace mavlink = protocol::mavlink;
-  if (m.msgid != mavlink::ExtendedSysState::kId || !imu_system || m.sysid != *imu_system) return std::nullopt;
+  if (m.msgid != mavlink::ExtendedSysState::kId || !imu || m.sysid != imu->sysid) return std::nullopt;
   const std::optional<mavlink::Decoded> decoded = mavlink::decode(m);
   const auto* state = decoded ? std::get_if<mavlink::ExtendedSysState>(&*decoded) : nullptr;
   if (!state) return std::nullopt;
@@ -20,7 +21,7 @@ std::vector<MavlinkLandDetectorChanges::Change> MavlinkLandDetectorChanges::afte
   std::vector<Change> out;
   const auto imu = decoder.mavlink_imu();
   for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
-    const std::optional<bool> landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
+    const std::optional<bool> landed = mavlink_landed(m, imu);
     if (!landed) continue;
     if (landed_ && *landed_ != *landed) out.push_back({*landed, m.sysid});
     landed_ = landed;
@@ -28,13 +29,17 @@ std::vector<MavlinkLandDetectorChanges::Change> MavlinkLandDetectorChanges::afte
   return out;
 }
 
-StoredLandDetector::StoredLandDetector(std::span<const store::Event> events) {
+std::vector<store::Event> land_detector_events(std::span<const store::Event> events) {
+  std::vector<store::Event> out;
   for (const store::Event& e : events) {
-    if (e.kind == "takeoff" || e.kind == "landing") events_.push_back(e);
+    if (e.kind == "takeoff" || e.kind == "landing") out.push_back(e);
   }
-  std::stable_sort(events_.begin(), events_.end(),
+  std::stable_sort(out.begin(), out.end(),
                    [](const store::Event& a, const store::Event& b) { return a.mono_ns < b.mono_ns; });
+  return out;
 }
+
+StoredLandDetector::StoredLandDetector(std::span<const store::Event> events) : events_(land_detector_events(events)) {}
 
 std::vector<StoredLandDetector::Change> StoredLandDetector::until(std::int64_t mono_ns) {
   std::vector<Change> out;

@@ -15,11 +15,12 @@
 
 namespace imubridge::pipeline {
 
-// What `m` says of its sender's landed state when it is an EXTENDED_SYS_STATE of system `imu_system` (the link's
-// IMU's: another vehicle's detector is not this IMU's): true on the ground; false in the air, taking off or landing
+// What `m` says of its sender's landed state when it is an EXTENDED_SYS_STATE of the system of `imu` (the link's IMU:
+// another vehicle's detector is not this IMU's): true on the ground; false in the air, taking off or landing
 // (moving) and when the detector does not know (undefined: rest is never assumed). nullopt for any other message,
 // and before the link knows its IMU.
-std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m, std::optional<std::uint8_t> imu_system);
+std::optional<bool> mavlink_landed(const protocol::mavlink::Message& m,
+                                   const std::optional<protocol::mavlink::ImuSource>& imu);
 
 // One MAVLink link's land detector as it changes its mind: what the recording stores as takeoff and landing events and
 // the daemon logs. The first state heard is where it starts, not a change.
@@ -35,6 +36,10 @@ class MavlinkLandDetectorChanges {
  private:
   std::optional<bool> landed_;
 };
+
+// The land detector's `takeoff` and `landing` events among a session's `events`, in time order (stable where times
+// tie).
+std::vector<store::Event> land_detector_events(std::span<const store::Event> events);
 
 // A session's stored land-detector events in time order, replayed against the chunks' receive times.
 class StoredLandDetector {

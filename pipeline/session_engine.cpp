@@ -28,7 +28,7 @@ void SessionEngine::on_chunk(std::size_t link, std::span<const std::uint8_t> byt
     // same sample.
     const auto imu = decoder.mavlink_imu();
     for (const protocol::mavlink::Message& m : decoder.mavlink_messages()) {
-      const auto landed = mavlink_landed(m, imu ? std::optional<std::uint8_t>(imu->sysid) : std::nullopt);
+      const auto landed = mavlink_landed(m, imu);
       if (landed) stage_->set_landed(static_cast<std::uint32_t>(link), *landed);
     }
   }

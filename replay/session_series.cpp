@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "estimator/differentiator.hpp"
+#include "pipeline/land_detector.hpp"
 #include "pipeline/session_config.hpp"
 
 namespace imubridge::replay {
@@ -163,13 +164,8 @@ class SeriesClock {
 // takeoff without a landing flies to the end; a landing without a takeoff from the start). nullopt without either.
 std::optional<std::vector<estimator::TimeWindow>> airborne_from_events(const store::Store& store, std::int64_t session,
                                                                        const SeriesClock& clock) {
-  std::vector<store::Event> events;
-  for (store::Event& e : store.events(session)) {
-    if (e.kind == "takeoff" || e.kind == "landing") events.push_back(std::move(e));
-  }
+  const std::vector<store::Event> events = pipeline::land_detector_events(store.events(session));
   if (events.empty()) return std::nullopt;
-  std::stable_sort(events.begin(), events.end(),
-                   [](const store::Event& a, const store::Event& b) { return a.mono_ns < b.mono_ns; });
   constexpr double kForever = std::numeric_limits<double>::infinity();
   std::vector<estimator::TimeWindow> out;
   std::optional<double> takeoff;
