@@ -341,6 +341,12 @@ bool Model::inert(std::size_t i) const {
   return setup_.velocity == VelocitySource::filter && !filter_runs() && i + 1 == base_size_;
 }
 
+std::string Model::inert_reason(std::size_t i) const {
+  if (!inert(i)) return "";
+  if (parameters_[i].lower == parameters_[i].upper) return "held at the only value its bounds allow";
+  return "held: nothing depends on it until a drag gives the filter something to fuse";
+}
+
 bool Model::filter_runs() const {
   return setup_.velocity == VelocitySource::filter &&
          (setup_.base == ModelKind::paper ||
@@ -348,7 +354,7 @@ bool Model::filter_runs() const {
 }
 
 std::vector<Vector3d> Model::accel_without_lever_arm(const estimator::FullModelParams& params,
-                                                    std::span<const Vector3d> gyro, std::size_t count) const {
+                                                     std::span<const Vector3d> gyro, std::size_t count) const {
   const Signals& s = signals();
   std::vector<Vector3d> gyro_rate_shifted;
   if (params.time_offset != 0.0) gyro_rate_shifted = delayed(s.t, s.gyro_rate, params.time_offset);
@@ -853,6 +859,10 @@ void standard_errors(ceres::Problem& problem, const Model& model, std::size_t re
     out.std_error_note = "on its bound, where the data cannot move it:";
     for (std::size_t i : held_on_bound) out.std_error_note += " " + params[i].name;
     out.std_error_note += " (the others' are computed with it held there)";
+  }
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    if (!model.inert(i)) continue;
+    out.std_error_note += (out.std_error_note.empty() ? "" : "; ") + params[i].name + " " + model.inert_reason(i);
   }
 }
 

@@ -54,6 +54,8 @@ class Model {
   // True for a parameter held at its start: one nothing depends on (the filter's process noise while the filter has no
   // drag to run with), or one whose bounds meet.
   bool inert(std::size_t i) const;
+  // Why parameter i is inert, as its missing standard error says it ("" when it is not).
+  std::string inert_reason(std::size_t i) const;
   // velocity `filter`: the filter's process noise at p (m/s^2/sqrt(Hz)), the base's last parameter; else the setup's.
   double process_noise(std::span<const double> p) const;
   static constexpr std::string_view kProcessNoiseParameter = "process_noise_log10";
@@ -153,9 +155,9 @@ enum class FitStop { cost, parameter_precision };
 using estimator::cores;
 
 // LM from `start` (clamped into the parameters' bounds) on the range's residuals. Standard errors from
-// ceres::Covariance (dense SVD) scaled by the residual variance, as identification/least_squares.cpp does. When the model
-// runs the filter, its Jacobian's columns are shared among `jacobian_threads` threads; the result does not depend on
-// how many.
+// ceres::Covariance (dense SVD) scaled by the residual variance, as identification/least_squares.cpp does. When the
+// model runs the filter, its Jacobian's columns are shared among `jacobian_threads` threads; the result does not depend
+// on how many.
 FitOutcome fit(const Model& model, std::vector<double> start, Range range, int max_iterations = 50,
                FitStop stop = FitStop::cost, unsigned jacobian_threads = 1);
 

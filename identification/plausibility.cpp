@@ -15,9 +15,12 @@ struct LimitEntry {
   const char* unit;
 };
 constexpr LimitEntry kLimits[] = {
-    {"lever_arm", &PlausibilityLimits::lever_arm, "m"},     {"wind", &PlausibilityLimits::wind, "m/s"},
-    {"accel_scale", &PlausibilityLimits::accel_scale, ""}, {"accel_cross", &PlausibilityLimits::accel_cross, ""},
-    {"gyro_bias", &PlausibilityLimits::gyro_bias, "rad/s"}, {"accel_bias", &PlausibilityLimits::accel_bias, "m/s^2"},
+    {"lever_arm", &PlausibilityLimits::lever_arm, "m"},
+    {"wind", &PlausibilityLimits::wind, "m/s"},
+    {"accel_scale", &PlausibilityLimits::accel_scale, ""},
+    {"accel_cross", &PlausibilityLimits::accel_cross, ""},
+    {"gyro_bias", &PlausibilityLimits::gyro_bias, "rad/s"},
+    {"accel_bias", &PlausibilityLimits::accel_bias, "m/s^2"},
     {"time_offset", &PlausibilityLimits::time_offset, "s"},
     {"drag_linear", &PlausibilityLimits::drag_linear, "1/s"},
     {"drag_quadratic", &PlausibilityLimits::drag_quadratic, "1/m"},
@@ -87,6 +90,17 @@ std::vector<Implausibility> check_plausibility(const FullModelParams& p, const P
 std::vector<std::pair<std::string, double>> limit_table(const PlausibilityLimits& limits) {
   std::vector<std::pair<std::string, double>> out;
   for (const LimitEntry& e : kLimits) out.emplace_back(e.name, limits.*(e.member));
+  return out;
+}
+
+std::string limit_help(const PlausibilityLimits& limits) {
+  std::string out;
+  for (const LimitEntry& e : kLimits) {
+    char value[32];
+    std::snprintf(value, sizeof value, "%g", limits.*(e.member));
+    out += std::string(out.empty() ? "" : ", ") + e.name + " (" + (*e.unit ? std::string(e.unit) + ", " : "") +
+           "default " + value + ")";
+  }
   return out;
 }
 

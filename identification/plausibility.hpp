@@ -30,8 +30,8 @@ struct PlausibilityLimits {
   // Drag at kBriskSpeed beyond g: holding that speed would need a tilt past 45 degrees, where multirotors do not cruise
   // (their attitude limits are 30-45 degrees). k = g / kBriskSpeed (1/s) and mu = g / kBriskSpeed^2 (1/m) alone each
   // give g there.
-  double drag_linear = 2.0;      // k per axis, 1/s
-  double drag_quadratic = 0.4;   // mu per axis, 1/m
+  double drag_linear = 2.0;     // k per axis, 1/s
+  double drag_quadratic = 0.4;  // mu per axis, 1/m
 };
 
 // One limit the values exceed, in a line a person reads: "wind 31.2 m/s exceeds its limit 20 m/s (--limit wind=...)".
@@ -48,12 +48,14 @@ std::vector<Implausibility> check_plausibility(const FullModelParams& params, co
 // A drag too small to see: at kBriskSpeed it gives less than kDragVisible of specific force, below what an
 // accelerometer reads through its noise, so the velocity inverted from it is noise. One line per such horizontal axis
 // ("no usable drag on x: ..."); empty when both axes have one. A fit on eq. (12)'s drifting velocity ends here.
-inline constexpr double kBriskSpeed = 5.0;     // m/s
-inline constexpr double kDragVisible = 0.1;    // m/s^2, the drag-velocity filter's default accelerometer noise
+inline constexpr double kBriskSpeed = 5.0;   // m/s
+inline constexpr double kDragVisible = 0.1;  // m/s^2, the drag-velocity filter's default accelerometer noise
 std::vector<std::string> negligible_drag(const FullModelParams& params);
 
-// The limits' names and values, in the table's order (for --help and the docs).
+// The limits' names and values, in the table's order (for the docs).
 std::vector<std::pair<std::string, double>> limit_table(const PlausibilityLimits& limits = {});
+// The same for --limit's help, each with its unit and default: "lever_arm (m, default 0.5), wind (m/s, ...), ...".
+std::string limit_help(const PlausibilityLimits& limits = {});
 
 // Applies "NAME=VALUE" (VALUE > 0) to `limits`; throws std::invalid_argument naming the valid limits otherwise.
 void override_limit(PlausibilityLimits& limits, std::string_view assignment);

@@ -107,9 +107,9 @@ inline void add_window_options(CLI::App& cmd, WindowArgs& w) {
 }
 
 inline void add_limit_option(CLI::App& cmd, std::vector<std::string>& limits) {
+  // From the limits' table, so a limit that refuses a fit is always one --help names.
   cmd.add_option("--limit", limits,
-                 "Override a plausibility limit, NAME=VALUE (repeatable): lever_arm (m), wind (m/s), accel_scale, "
-                 "accel_cross, gyro_bias (rad/s), accel_bias (m/s^2), time_offset (s)");
+                 "Override a plausibility limit, NAME=VALUE (repeatable): " + estimator::limit_help());
 }
 
 inline estimator::PlausibilityLimits plausibility_limits(const std::vector<std::string>& overrides) {

@@ -18,9 +18,9 @@
 #include "diagnose/search.hpp"
 #include "diagnose/signals.hpp"
 #include "sim/imu_series.hpp"
-#include "tests/support/diagnosis_text.hpp"
 #include "sim/scenario.hpp"
 #include "sim/simulator.hpp"
+#include "tests/support/diagnosis_text.hpp"
 
 namespace imubridge::diagnose {
 namespace {
@@ -152,13 +152,14 @@ TEST(FromTheImuAlone, LinearDragAndATimeOffset) {
   EXPECT_EQ(chosen(d), (std::vector<std::string>{"linear_drag", "time_offset"}));
 }
 
-// The full model with one effect, fitted from the IMU alone (velocity `filter`) on 20 s of the paper flight with
-// `sim_effects` hidden. Not movable: the model points at the signals.
+// The full model with one effect (none: nullptr), fitted from the IMU alone (velocity `filter`) on 20 s of the paper
+// flight with `sim_effects` hidden. Not movable: the model points at the signals.
 class FilterFit {
  public:
   FilterFit(const std::vector<std::string>& sim_effects, const char* effect)
       : signals(prepare_signals(imu_alone(sim_effects))),
-        model(signals, filter_setup(signals), {find_effect(effect)}),
+        model(signals, filter_setup(signals),
+              effect ? std::vector<const Effect*>{find_effect(effect)} : std::vector<const Effect*>{}),
         train(range_of(signals, kWhole)) {}
   FilterFit(const FilterFit&) = delete;
   FilterFit& operator=(const FilterFit&) = delete;
@@ -275,6 +276,23 @@ TEST(DiagnoseCovariance, AParameterOnItsBoundLeavesTheOthersStandardErrors) {
       EXPECT_TRUE(std::isfinite(f.std_errors[i])) << model.parameters()[i].name;
   }
   EXPECT_NE(f.std_error_note.find(std::string(Model::kProcessNoiseParameter)), std::string::npos) << f.std_error_note;
+}
+
+// The base without drag gives the filter nothing to fuse: its process noise moves nothing and is held, and its
+// missing standard error says that, not a covariance that "could not be computed" (issue 24, item 7).
+TEST(DiagnoseCovariance, AHeldParameterSaysWhyItHasNoStandardError) {
+  const FilterFit flight({}, nullptr);
+  const Model& model = flight.model;
+  const std::size_t noise = model.base_size() - 1;
+  ASSERT_EQ(model.parameters()[noise].name, Model::kProcessNoiseParameter);
+  ASSERT_TRUE(model.inert(noise));
+  const FitOutcome f = fit(model, flight.start(), flight.train, 6, FitStop::cost, 1);
+  EXPECT_TRUE(f.covariance_failure.empty()) << f.covariance_failure;
+  EXPECT_TRUE(std::isnan(f.std_errors[noise]));
+  EXPECT_NE(f.std_error_note.find(std::string(Model::kProcessNoiseParameter) + " held: nothing depends on it"),
+            std::string::npos)
+      << f.std_error_note;
+  for (std::size_t i = 0; i < noise; ++i) EXPECT_TRUE(std::isfinite(f.std_errors[i])) << model.parameters()[i].name;
 }
 
 }  // namespace

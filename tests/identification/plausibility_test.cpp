@@ -72,6 +72,15 @@ TEST(Plausibility, TheTableListsEveryLimit) {
   EXPECT_DOUBLE_EQ(table.front().second, 0.5);
 }
 
+// --limit's help is made from the table: every limit a refusal can name (drag_linear, drag_quadratic included) is
+// there.
+TEST(Plausibility, TheHelpNamesEveryLimitWithItsUnitAndDefault) {
+  const std::string help = limit_help();
+  for (const auto& [name, value] : limit_table()) EXPECT_NE(help.find(name + " ("), std::string::npos) << name;
+  EXPECT_NE(help.find("drag_quadratic (1/m, default 0.4)"), std::string::npos) << help;
+  EXPECT_NE(help.find("accel_scale (default 0.1)"), std::string::npos) << help;
+}
+
 // A drag fitted to nothing (eq. (12)'s drifting velocity takes mu to ~1e-6) is said, axis by axis.
 TEST(Plausibility, ADragTooSmallToSeeIsSaid) {
   FullModelParams p;
