@@ -98,6 +98,12 @@ struct CandidateTrial {
   // log-likelihood per measurement (nats). A step must not make it worse (DiagnoseOptions::flight_tolerance).
   std::optional<double> velocity_validation{};
   std::optional<double> likelihood_validation{};
+  // With the reference, a first drag (the current model gives no velocity): the one-sided p-value of its validation
+  // velocity against zero velocity's (velocity_gain_test), which adds it where the airframe's vibration hides the drag
+  // from the specific-force residual (docs/effects.md, "The velocity's test"). nullopt where not run.
+  std::optional<double> velocity_test_p{};
+  // Non-empty for a candidate that passes by the velocity's test alone (the residual's rules do not pass it): says so.
+  std::string admitted_by{};
   // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level), the
   // minimum-gain rule (its gain against the minimum), or the velocity or likelihood rule. Empty for the one added.
   std::string rejected_by;

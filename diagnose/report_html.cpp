@@ -362,7 +362,8 @@ void candidates_table(const std::vector<CandidateTrial>& candidates, const std::
     rows.push_back({escape(with_needed(c.effect, c.with)), tried ? num(c.rmse_train) : "",
                     tried ? num(c.rmse_validation) : "", tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
                     tried ? (c.significant ? "yes" : "no") : "",
-                    is_chosen ? "chosen" : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});
+                    is_chosen ? (c.admitted_by.empty() ? "chosen" : "chosen by " + escape(c.admitted_by))
+                              : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});
     classes.emplace_back(is_chosen ? "chosen" : "");
   }
   if (rows.empty()) {

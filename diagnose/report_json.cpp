@@ -144,6 +144,8 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
                     {"significant", c.significant},
                     {"velocity_validation_m_s", c.velocity_validation ? number(*c.velocity_validation) : json()},
                     {"likelihood_validation", c.likelihood_validation ? number(*c.likelihood_validation) : json()},
+                    {"velocity_test_p", c.velocity_test_p ? number(*c.velocity_test_p) : json()},
+                    {"admitted_by", c.admitted_by},
                     {"rejected_by", c.rejected_by},
                     {"skipped", c.skipped}});
   }

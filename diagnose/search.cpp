@@ -4,6 +4,7 @@
 #include <atomic>
 #include <Eigen/Cholesky>
 #include <boost/math/distributions/fisher_f.hpp>
+#include <boost/math/distributions/students_t.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -285,6 +286,22 @@ double effective_samples(std::span<const double> x, std::size_t max_lag) {
   return std::clamp(n / (1.0 + 2.0 * sum), 1.0, n);
 }
 
+FTest velocity_gain_test(std::span<const double> block_gains) {
+  if (block_gains.size() < 2) return {};
+  const double n = static_cast<double>(block_gains.size());
+  double mean = 0.0;
+  for (double g : block_gains) mean += g;
+  mean /= n;
+  double variance = 0.0;
+  for (double g : block_gains) variance += (g - mean) * (g - mean);
+  variance /= n - 1.0;
+  const double n_eff = effective_samples(block_gains, block_gains.size() / 2);
+  if (!(mean > 0.0) || n_eff < 2.0) return {};
+  if (!(variance > 0.0)) return {std::numeric_limits<double>::infinity(), 0.0};
+  const double statistic = mean / std::sqrt(variance / n_eff);
+  return {statistic, boost::math::cdf(boost::math::complement(boost::math::students_t(n_eff - 1.0), statistic))};
+}
+
 std::string_view diagnose_spelling(VelocitySource velocity) {
   switch (velocity) {
     case VelocitySource::reference:
@@ -405,6 +422,10 @@ Diagnosis describe_request(const Search& search) {
   out.train_start = search.windows.train.start, out.train_end = search.windows.train.end;
   out.validate_start = search.windows.validate.start, out.validate_end = search.windows.validate.end;
   out.significance_rule = describe_rule(options);
+  if (search.judged_by_velocity && options.flight_rules)
+    out.significance_rule +=
+        "; a first drag also passes by the velocity's test (its validation velocity's gain over zero velocity's, "
+        "a one-sided t-test on 1-s blocks at the same level)";
   if (search.setup.velocity == VelocitySource::eq12) {
     if (auto drift = estimator::eq12_drift_warning(search.series, search.signals.level_mounting, search.windows.train))
       out.warnings.push_back(std::move(*drift));
@@ -629,6 +650,12 @@ State measure_candidate(const StepContext& step, const Effect& effect, const Mod
                         model.parameters().size() - offset, model.parameters().size(), n_eff);
   trial.statistic = test.statistic;
   trial.p_value = test.p_value;
+  // A first drag, with the reference: the current model gives the user no velocity (zero velocity's, its note says),
+  // and whether the drag is there shows best in the velocity it gives.
+  const auto gives_velocity = [](const State& s) { return s.summary.velocity && s.summary.velocity->note.empty(); };
+  if (search.judged_by_velocity && search.options.flight_rules && effect.adds_drag() && !gives_velocity(current) &&
+      gives_velocity(candidate))
+    trial.velocity_test_p = velocity_gain_test(candidate.summary.velocity->validation_gain_over_zero).p_value;
   return candidate;
 }
 
@@ -728,9 +755,21 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
         flight_score(t.velocity_validation, t.likelihood_validation, search.judged_by_velocity);
     const bool no_worse_flown =
         !options.flight_rules || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
-    t.significant = improves && passes_f_test && no_worse_flown;
+    // A first drag the residual's rules do not see, which the velocity it gives shows beyond chance.
+    const bool velocity_shows_it = t.velocity_test_p && *t.velocity_test_p < level;
+    t.significant = ((improves && passes_f_test) || velocity_shows_it) && no_worse_flown;
     char why[260];
     t.rejected_by.clear();
+    t.admitted_by.clear();
+    if (t.significant && !(improves && passes_f_test)) {
+      std::snprintf(why, sizeof why,
+                    "the velocity's test: validation velocity RMSE %.3f m/s against zero velocity's %.3f, p = %.3g, "
+                    "below %.3g (the specific-force residual %+.2f %%)",
+                    *t.velocity_validation, *before.velocity, *t.velocity_test_p, level,
+                    100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
+      t.admitted_by = why;
+    }
+    if (t.significant) continue;
     if (improves && passes_f_test && !no_worse_flown && search.judged_by_velocity) {
       std::snprintf(why, sizeof why,
                     "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
@@ -750,6 +789,10 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
       std::snprintf(why, sizeof why, "F-test: p = %.3g, not below %.3g (%g / %zu candidates)", t.p_value, level,
                     options.significance, out.tried);
       t.rejected_by = why;
+    }
+    if (t.velocity_test_p && !t.rejected_by.empty()) {
+      std::snprintf(why, sizeof why, "; nor the velocity's test: p = %.3g, not below %.3g", *t.velocity_test_p, level);
+      t.rejected_by += why;
     }
   }
 }

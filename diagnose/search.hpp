@@ -103,6 +103,14 @@ struct FTest {
 };
 FTest validation_f_test(double rss_before, double rss_after, std::size_t added, std::size_t parameters, double n_eff);
 
+// The velocity's test (docs/effects.md): whether a model flies nearer the reference than zero velocity beyond what
+// chance gives, from its gain over zero velocity on the validation window, block by block
+// (estimator::VelocityEvaluation::gain_over_zero). A one-sided t-test of the blocks' mean (Diebold and Mariano's test
+// of two forecasts' losses), their count corrected for their own correlation (effective_samples over lags up to half
+// of them), since a velocity error lasts as long as the drag's time constant and more. p_value 1 when the mean gain
+// is not positive or fewer than two blocks are worth anything.
+FTest velocity_gain_test(std::span<const double> block_gains);
+
 // A parameter within this fraction of a bound's size (on it, for a bound of zero) is "at the bound": the data pushed it
 // to the edge, so its value says more about the range than about the vehicle.
 inline constexpr double kAtBoundFraction = 0.01;

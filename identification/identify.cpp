@@ -419,6 +419,11 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
   struct Sums {
     VelocityErrorSum filter, inversion, eq12, zero;
     double nees = 0.0;
+    double block = -1.0, gain = 0.0, gain_samples = 0.0;  // the gain over zero velocity's block being summed
+    void close_block(std::vector<double>& blocks) {
+      if (gain_samples > 0.0) blocks.push_back(gain / gain_samples);
+      gain = gain_samples = 0.0;
+    }
   };
   std::vector<Sums> sums(windows.size());
   LandedCursor landed(series.landed);
@@ -437,11 +442,16 @@ std::vector<VelocityEvaluation> evaluate_velocity(const ImuSeries& series, const
       sums[w].eq12.add(open_loop[i].head<2>() - v);
       sums[w].zero.add(-v);
       sums[w].nees += (e->v - v).cwiseAbs2().cwiseQuotient(e->v_var).sum();
+      const double block = std::floor((e->t - out[w].window.start) / kGainBlockSeconds);
+      if (block != sums[w].block) sums[w].close_block(out[w].gain_over_zero), sums[w].block = block;
+      sums[w].gain += v.squaredNorm() - (e->v - v).squaredNorm();
+      sums[w].gain_samples += 1.0;
       ++out[w].samples;
     }
   }
   for (std::size_t w = 0; w < windows.size(); ++w) {
     if (out[w].samples == 0) throw std::invalid_argument("no estimates inside the evaluation window");
+    sums[w].close_block(out[w].gain_over_zero);
     out[w].estimator = sums[w].filter.rmse();
     out[w].estimator_mean_error = sums[w].filter.mean();
     out[w].estimator_constant_known = sums[w].filter.rmse_about_mean();

@@ -162,6 +162,7 @@ struct VelocityErrorSum {
   }
 };
 
+inline constexpr double kGainBlockSeconds = 1.0;
 struct VelocityEvaluation {
   TimeWindow window;
   std::size_t samples = 0;  // samples scored: in the window and with an estimate
@@ -179,6 +180,11 @@ struct VelocityEvaluation {
   // sum over x, y of (v - v_ref)^2 / v_var. A filter whose variance says what its error is gives 2 (the axes); more
   // means it claims more certainty than it has.
   double nees = 0.0;
+  // How much nearer the reference the filter is than zero velocity, |v_ref|^2 - |v - v_ref|^2 (m^2/s^2), averaged over
+  // each kGainBlockSeconds of the window that has scored samples, in time order. Its mean is about zero velocity's mean
+  // square error less the filter's; a paired test on it tells a model that flies better than "not moving" from one
+  // that does so by chance (diagnose's velocity_gain_test). Blocks, not samples: a day at 1 kHz stays small.
+  std::vector<double> gain_over_zero;
   DragVelocityCounters counters;
 };
 

@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "estimator/drag_velocity.hpp"
@@ -42,7 +43,7 @@ VelocityScores zero_velocity_scores(const ImuSeries& series, const Eigen::Vector
   rotation_only.mounting = mounting;
   const LeverArmCompensator to_body(rotation_only);
   const std::vector<Eigen::Vector3d> v = truth(series, &to_body);
-  return {zero_error(series, v, windows.train), zero_error(series, v, windows.validate), ""};
+  return {zero_error(series, v, windows.train), zero_error(series, v, windows.validate), {}, ""};
 }
 
 std::optional<VelocityScores> score_velocity(const ImuSeries& series, const ModelParams& params, const Windows& windows,
@@ -53,13 +54,13 @@ std::optional<VelocityScores> score_velocity(const ImuSeries& series, const Mode
       // Flown there as on any flight it was not fitted on: its conditions (wind, biases) left behind, `transferred`.
       const ModelParams elsewhere = on_another_flight(params);
       const VelocityError train = evaluate_velocity(series, params.full, windows.train, config_for(params)).estimator;
-      const VelocityError validation =
-          evaluate_velocity(series, elsewhere.full, windows.validate, config_for(elsewhere)).estimator;
-      return VelocityScores{train, validation, ""};
+      VelocityEvaluation validation =
+          evaluate_velocity(series, elsewhere.full, windows.validate, config_for(elsewhere));
+      return VelocityScores{train, validation.estimator, std::move(validation.gain_over_zero), ""};
     }
     const TimeWindow both[] = {windows.train, windows.validate};
-    const std::vector<VelocityEvaluation> e = evaluate_velocity(series, params.full, both, config_for(params));
-    return VelocityScores{e[0].estimator, e[1].estimator, ""};
+    std::vector<VelocityEvaluation> e = evaluate_velocity(series, params.full, both, config_for(params));
+    return VelocityScores{e[0].estimator, e[1].estimator, std::move(e[1].gain_over_zero), ""};
   } catch (const std::invalid_argument& e) {
     VelocityScores zero = zero_velocity_scores(series, params.full.mounting, windows);
     zero.note = std::string("no velocity from this model (") + e.what() + "); scored as zero velocity";

@@ -7,6 +7,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "estimator/imu_series.hpp"
 #include "estimator/params.hpp"
@@ -16,6 +17,8 @@ namespace imubridge::estimator {
 
 struct VelocityScores {
   VelocityError train, validation;
+  // VelocityEvaluation::gain_over_zero on the validation window (per second); empty when the model gives no velocity.
+  std::vector<double> validation_gain_over_zero;
   // Non-empty when the estimator gives no velocity with this model (no drag law on either axis yet): the scores are
   // then zero velocity's, which is what such a model tells a user, and this says so.
   std::string note;

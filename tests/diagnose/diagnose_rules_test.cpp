@@ -122,5 +122,50 @@ TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood)
   EXPECT_GT(judged, 0u);
 }
 
+// The vibration of a real airframe buries a drag in the specific force (the X500's residual is 2.1 m/s^2 RMS), while
+// the estimator filters it out of the velocity: with the reference, the velocity a first drag gives shows it.
+TEST(DiagnoseRules, AFirstDragTheNoiseHidesFromTheResidualIsAddedByTheVelocityItGives) {
+  // White noise of 0.05 m/s^2/sqrt(Hz) (0.5 m/s^2 per sample at 200 Hz) on the agile flight and its quadratic drag:
+  // the drag lowers the validation residual by about 1 %, under the minimum gain.
+  const std::vector<std::string> noise{"accel_noise=0.05"};
+  const estimator::ImuSeries flight = sim::imu_series(sim::simulate(sim::make_scenario("agile", 42, 120.0, noise)));
+  DiagnoseOptions o = options(VelocitySource::reference, 1);
+  o.train = estimator::TimeWindow{0.0, 60.0};
+  o.validate = estimator::TimeWindow{60.0, 120.0};
+  const Diagnosis d = run_diagnosis(flight, o);
+  ASSERT_EQ(d.steps.size(), 1u);
+  EXPECT_EQ(d.steps[0].effect, "quadratic_drag");
+  EXPECT_GT(d.steps[0].fit.rmse_validation, (1.0 - o.min_improvement) * d.base.rmse_validation);
+  ASSERT_TRUE(d.steps[0].fit.velocity && d.zero_velocity);
+  EXPECT_LT(d.steps[0].fit.velocity->validation.horizontal, 0.7 * d.zero_velocity->validation.horizontal);
+  for (const CandidateTrial& c : d.steps[0].candidates) {
+    if (c.effect == "quadratic_drag") {
+      EXPECT_NE(c.admitted_by.find("the velocity's test"), std::string::npos);
+    }
+    // A drag that flies worse than not moving is not made significant by the test.
+    if (c.velocity_test_p && c.velocity_validation && *c.velocity_validation > d.zero_velocity->validation.horizontal) {
+      EXPECT_FALSE(c.significant) << c.effect;
+    }
+  }
+  // The residual's rules alone add nothing.
+  o.flight_rules = false;
+  EXPECT_TRUE(run_diagnosis(flight, o).steps.empty());
+}
+
+TEST(DiagnoseRules, TheVelocitysTestCountsCorrelatedGainsAsFewerSamples) {
+  // Seconds whose gain alternates about a positive mean show it clearly; the same values in two runs (each half the
+  // window, like a velocity error held over a leg) are worth two seconds, and the test says so.
+  constexpr std::size_t kSeconds = 40;
+  std::vector<double> alternating, runs, negative;
+  for (std::size_t b = 0; b < kSeconds; ++b) {
+    alternating.push_back(1.0 + ((b % 2 == 0) ? 0.8 : -0.8));
+    runs.push_back(1.0 + ((b < kSeconds / 2) ? 0.8 : -0.8));
+    negative.push_back(-alternating.back());
+  }
+  EXPECT_LT(velocity_gain_test(alternating).p_value, 1e-6);
+  EXPECT_GT(velocity_gain_test(runs).p_value, 0.01);
+  EXPECT_EQ(velocity_gain_test(negative).p_value, 1.0);
+}
+
 }  // namespace
 }  // namespace imubridge::diagnose
