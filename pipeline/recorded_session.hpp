@@ -25,9 +25,9 @@ struct SessionLink {
 };
 
 struct SessionStart {
-  std::string kind;       // "live", "sim", "import"
-  std::string source;     // for people: what produced it
-  nlohmann::json config;  // the writer's own snapshot; the links' recording settings are added to it
+  std::string kind;         // "live", "sim", "import"
+  std::string source{};     // for people: what produced it
+  nlohmann::json config{};  // the writer's own snapshot; the links' recording settings are added to it
   std::int64_t started_wall_ns = 0;
   std::string note{};  // when set, the session's first event: what it continues, and why
   std::int64_t note_mono_ns = 0;

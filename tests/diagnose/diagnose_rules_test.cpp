@@ -108,8 +108,9 @@ TEST(DiagnoseRules, FromTheImuAloneEveryCandidateIsJudgedByTheFiltersLikelihood)
       ASSERT_TRUE(c.likelihood_validation) << c.effect;
       ++judged;
       // A candidate that passes the residual's rules but lowers the likelihood is refused by the likelihood rule.
-      if (c.rejected_by.rfind("likelihood rule", 0) == 0)
+      if (c.rejected_by.rfind("likelihood rule", 0) == 0) {
         EXPECT_LT(*c.likelihood_validation, before - DiagnoseOptions{}.flight_tolerance * std::abs(before));
+      }
     }
   };
   for (std::size_t i = 1; i < d.steps.size(); ++i) {

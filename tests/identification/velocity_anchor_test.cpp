@@ -43,7 +43,7 @@ TEST(LeastSquaresAnchor, FitsTheDragLineOnBlockMeans) {
 
 TEST(LeastSquaresAnchor, SmoothingTakesTheVibrationOutOfTheInvertedVelocity) {
   const ImuSeries s = drag_flight({0.3, 0.3}, {0.0, 0.0}, 2.0, 2);
-  const LeastSquaresDragScores scores = score_least_squares_drag(s, {{0.3, 0.3}, {0.0, 0.0}}, {0.0, 60.0});
+  const LeastSquaresDragScores scores = score_least_squares_drag(s, {{0.3, 0.3}, {0.0, 0.0}, ""}, {0.0, 60.0});
   EXPECT_EQ(scores.blocks, 600u);
   // 2 m/s^2 of white vibration over a 0.1-s block of 20 samples leaves 0.45 m/s^2, 1.5 m/s once divided by k; the
   // 1-s average of 10 blocks a third of that.
@@ -65,7 +65,7 @@ TEST(LeastSquaresAnchor, CarriedToAnotherFlightItCarriesTheFirstFlightsOffset) {
 TEST(LeastSquaresAnchor, RefusesWhatItCannotFit) {
   ImuSeries s = drag_flight({0.3, 0.3}, {0.0, 0.0}, 0.1, 5);
   EXPECT_THROW(fit_least_squares_drag(s, {100.0, 200.0}), std::invalid_argument);  // no block in the window
-  EXPECT_THROW(score_least_squares_drag(s, {{0.3, 0.3}, {0.0, 0.0}}, {100.0, 200.0}), std::invalid_argument);
+  EXPECT_THROW(score_least_squares_drag(s, {{0.3, 0.3}, {0.0, 0.0}, ""}, {100.0, 200.0}), std::invalid_argument);
   // An accelerometer that rises with the velocity is no drag: nothing to invert.
   for (std::size_t i = 0; i < s.size(); ++i) s.accel[i].x() = -s.accel[i].x();
   try {

@@ -238,7 +238,10 @@ TEST(SessionEngine, ARecordingCanEndAndAnotherBeginWhileTheEngineRunsOn) {
       SessionRecording recording(store, recorded, links, engine);
       engine.add_sink(recording);
       const std::size_t until = f + 1 < files.size() ? switch_at : chunks.size();
-      for (std::size_t i = f == 0 ? 0 : switch_at; i < until; ++i) engine.on_chunk(0, chunks[i], t += 1'000, t);
+      for (std::size_t i = f == 0 ? 0 : switch_at; i < until; ++i) {
+        t += 1'000;
+        engine.on_chunk(0, chunks[i], t, t);
+      }
       if (f + 1 == files.size()) engine.finish_link(0, t, t);
       recording.end(engine, t, t);
       engine.remove_sink(recording);
