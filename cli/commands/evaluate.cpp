@@ -18,6 +18,7 @@
 #include "cli/commands/reference_delay_option.hpp"
 #include "cli/commands/session_list.hpp"
 #include "cli/commands/session_windows.hpp"
+#include "diagnose/search.hpp"
 #include "estimator/params.hpp"
 #include "identification/flight_set.hpp"
 #include "identification/identify.hpp"
@@ -130,6 +131,12 @@ json evaluate_session(const store::Store& store, std::int64_t id, const std::opt
     out["estimator_mean_error_m_s"] = {e.estimator_mean_error.x(), e.estimator_mean_error.y()};
     // Expected 2 (two axes) when the filter's variance is honest; docs/estimator.md.
     out["estimator_nees"] = e.nees;
+    // Whether the estimator flies nearer the reference than "not moving", or further, beyond what one window's
+    // correlated errors give by chance: diagnose's velocity test, one-sided each way (docs/identification.md).
+    std::vector<double> loss = e.gain_over_zero;
+    for (double& g : loss) g = -g;
+    out["estimator_versus_zero_p"] = {{"better", diagnose::velocity_gain_test(e.gain_over_zero).p_value},
+                                      {"worse", diagnose::velocity_gain_test(loss).p_value}};
     out["estimator_counters"] = {{"samples_in", c.samples_in},
                                  {"estimates_out", c.estimates_out},
                                  {"rejected_non_finite", c.rejected_non_finite},
@@ -184,6 +191,14 @@ double median(std::vector<double> x) {
   return n % 2 == 1 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
+// A flight's estimator against zero velocity at this one-sided level, each way: per flight, as a user reads one.
+constexpr double kVersusZeroLevel = 0.01;
+const char* versus_zero(const json& p) {
+  if (p["better"].get<double>() < kVersusZeroLevel) return "better";
+  if (p["worse"].get<double>() < kVersusZeroLevel) return "worse";
+  return "-";
+}
+
 // Several flights: the per-flight table on stderr, and for each velocity scored (the estimator's, the anchor's) the
 // medians and the count of flights worse than zero velocity, which is how a user judges a calibration.
 json summarise(const json& flights, std::size_t failed) {
@@ -192,13 +207,14 @@ json summarise(const json& flights, std::size_t failed) {
     bool estimator;  // the filter's: it has a NEES
     std::vector<double> rmse, ratio;
     std::size_t worse = 0;
+    std::size_t clearly_better = 0, clearly_worse = 0;  // the estimator's, by estimator_versus_zero_p
   };
   std::vector<Column> columns{{"estimator", true, {}, {}},
                               {"least_squares_smoothed", false, {}, {}},
                               {"estimator_constant_known", false, {}, {}}};
   std::vector<double> zero, nees;
-  std::fprintf(stderr, "%8s %9s %9s %7s %6s %12s %12s\n", "session", "zero", "estimator", "ratio", "nees",
-               "ls_smoothed", "const_known");
+  std::fprintf(stderr, "%8s %9s %9s %7s %6s %7s %12s %12s\n", "session", "zero", "estimator", "ratio", "nees",
+               "vs_zero", "ls_smoothed", "const_known");
   for (const json& f : flights) {
     const long long session = f["session"].get<long long>();
     if (f.contains("error")) {
@@ -211,7 +227,7 @@ json summarise(const json& flights, std::size_t failed) {
     std::fprintf(stderr, "%8lld %9.3f", session, z);
     for (Column& c : columns) {
       if (!rmse.contains(c.source)) {
-        std::fprintf(stderr, c.estimator ? " %9s %7s %6s" : " %12s", "-", "-", "-");
+        std::fprintf(stderr, c.estimator ? " %9s %7s %6s %7s" : " %12s", "-", "-", "-", "-");
         continue;
       }
       const double e = rmse[c.source]["horizontal"];
@@ -219,7 +235,10 @@ json summarise(const json& flights, std::size_t failed) {
       c.worse += e > z ? 1 : 0;
       if (c.estimator) {
         nees.push_back(f["estimator_nees"]);
-        std::fprintf(stderr, " %9.3f %7.2f %6.2f", e, e / z, nees.back());
+        const char* versus = versus_zero(f["estimator_versus_zero_p"]);
+        c.clearly_better += versus[0] == 'b' ? 1 : 0;
+        c.clearly_worse += versus[0] == 'w' ? 1 : 0;
+        std::fprintf(stderr, " %9.3f %7.2f %6.2f %7s", e, e / z, nees.back(), versus);
       } else {
         std::fprintf(stderr, " %12.3f", e);
       }
@@ -237,7 +256,10 @@ json summarise(const json& flights, std::size_t failed) {
                  c.source, median(c.rmse), median(c.ratio), c.worse, c.rmse.size());
     if (c.estimator) {
       summary[c.source]["median_nees"] = median(nees);
-      std::fprintf(stderr, ", median NEES %.2f", median(nees));
+      summary[c.source]["flights_clearly_better_than_zero"] = c.clearly_better;
+      summary[c.source]["flights_clearly_worse_than_zero"] = c.clearly_worse;
+      std::fprintf(stderr, ", median NEES %.2f; beyond chance (p < %g): %zu better than zero, %zu worse", median(nees),
+                   kVersusZeroLevel, c.clearly_better, c.clearly_worse);
     }
     std::fprintf(stderr, "\n");
   }

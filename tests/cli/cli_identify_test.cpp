@@ -161,6 +161,13 @@ TEST_F(IdentifyCommand, EvaluateScoresOneCalibrationOverSeveralFlights) {
   const json& summary = e["summary"];
   EXPECT_EQ(summary["flights_scored"], 2);
   EXPECT_EQ(summary["estimator"]["flights_worse_than_zero"], 0);
+  // Each flight's estimator against zero velocity beyond chance, both ways; these fly far better than it.
+  EXPECT_EQ(summary["estimator"]["flights_clearly_better_than_zero"], 2);
+  EXPECT_EQ(summary["estimator"]["flights_clearly_worse_than_zero"], 0);
+  for (const json& f : e["flights"]) {
+    EXPECT_LT(f["estimator_versus_zero_p"]["better"].get<double>(), 0.01);
+    EXPECT_EQ(f["estimator_versus_zero_p"]["worse"].get<double>(), 1.0);
+  }
   // The median of two is their mean.
   const auto horizontal = [&e](int f, const char* source) {
     return e["flights"][f]["rmse_m_s"][source]["horizontal"].get<double>();
