@@ -226,7 +226,7 @@ std::vector<ResidualAnalysis> analyse(const Model& model, const State& state, Ra
   return out;
 }
 
-std::string describe_rule(const DiagnoseOptions& o) {
+std::string describe_rule(const DiagnoseOptions& o, bool judged_by_velocity) {
   char text[300];
   std::snprintf(text, sizeof text,
                 "F-test on the validation residual sums of squares (effective sample count from the residual's "
@@ -238,6 +238,10 @@ std::string describe_rule(const DiagnoseOptions& o) {
                   o.lowpass_hz);
     rule += text;
   }
+  if (judged_by_velocity && o.flight_rules)
+    rule +=
+        "; a first drag also passes by the velocity's test (its validation velocity's gain over zero velocity's, "
+        "a one-sided t-test on 1-s blocks at the same level)";
   return rule;
 }
 
@@ -421,11 +425,7 @@ Diagnosis describe_request(const Search& search) {
   out.velocity_source = std::string(diagnose_spelling(search.setup.velocity));
   out.train_start = search.windows.train.start, out.train_end = search.windows.train.end;
   out.validate_start = search.windows.validate.start, out.validate_end = search.windows.validate.end;
-  out.significance_rule = describe_rule(options);
-  if (search.judged_by_velocity && options.flight_rules)
-    out.significance_rule +=
-        "; a first drag also passes by the velocity's test (its validation velocity's gain over zero velocity's, "
-        "a one-sided t-test on 1-s blocks at the same level)";
+  out.significance_rule = describe_rule(options, search.judged_by_velocity);
   if (search.setup.velocity == VelocitySource::eq12) {
     if (auto drift = estimator::eq12_drift_warning(search.series, search.signals.level_mounting, search.windows.train))
       out.warnings.push_back(std::move(*drift));

@@ -12,6 +12,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "cli/command.hpp"
@@ -193,7 +194,7 @@ double median(std::vector<double> x) {
 
 // A flight's estimator against zero velocity at this one-sided level, each way: per flight, as a user reads one.
 constexpr double kVersusZeroLevel = 0.01;
-const char* versus_zero(const json& p) {
+std::string_view versus_zero(const json& p) {
   if (p["better"].get<double>() < kVersusZeroLevel) return "better";
   if (p["worse"].get<double>() < kVersusZeroLevel) return "worse";
   return "-";
@@ -235,10 +236,10 @@ json summarise(const json& flights, std::size_t failed) {
       c.worse += e > z ? 1 : 0;
       if (c.estimator) {
         nees.push_back(f["estimator_nees"]);
-        const char* versus = versus_zero(f["estimator_versus_zero_p"]);
-        c.clearly_better += versus[0] == 'b' ? 1 : 0;
-        c.clearly_worse += versus[0] == 'w' ? 1 : 0;
-        std::fprintf(stderr, " %9.3f %7.2f %6.2f %7s", e, e / z, nees.back(), versus);
+        const std::string_view versus = versus_zero(f["estimator_versus_zero_p"]);
+        c.clearly_better += versus == "better" ? 1 : 0;
+        c.clearly_worse += versus == "worse" ? 1 : 0;
+        std::fprintf(stderr, " %9.3f %7.2f %6.2f %7s", e, e / z, nees.back(), std::string(versus).c_str());
       } else {
         std::fprintf(stderr, " %12.3f", e);
       }
