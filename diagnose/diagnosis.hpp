@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "diagnose/gyro_against_reference.hpp"
 #include "estimator/params.hpp"
 #include "identification/velocity_scores.hpp"
 
@@ -102,7 +103,12 @@ struct CandidateTrial {
   // velocity against zero velocity's (velocity_gain_test), which adds it where the airframe's vibration hides the drag
   // from the specific-force residual (docs/effects.md, "The velocity's test"). nullopt where not run.
   std::optional<double> velocity_test_p{};
-  // Non-empty for a candidate that passes by the velocity's test alone (the residual's rules do not pass it): says so.
+  // With the reference, gyro_bias: the p-value of the gyro's bias against the reference's attitude on the validation
+  // window (gyro_against_reference), which adds it though the specific force hardly shows it (docs/effects.md, "The
+  // reference attitude's test"). nullopt where not run.
+  std::optional<double> attitude_test_p{};
+  // Non-empty for a candidate that passes by the velocity's or the attitude's test alone (the residual's rules do not
+  // pass it): says so.
   std::string admitted_by{};
   // Why a tried candidate was not added, naming the rule: the F-test (its p-value against the level), the
   // minimum-gain rule (its gain against the minimum), or the velocity or likelihood rule. Empty for the one added.
@@ -173,6 +179,8 @@ struct Diagnosis {
   std::vector<AxisSeries> series;
   // Zero velocity's error (m/s): the floor any velocity estimate must beat. With a reference only.
   std::optional<estimator::VelocityScores> zero_velocity;
+  // With the reference's attitude: the gyro's bias against it on the training and validation windows.
+  std::optional<GyroAgainstReference> gyro_train, gyro_validation;
   // The final model as the live estimator runs it (PARAMS.json).
   estimator::ModelParams final_params;
   std::vector<std::string> warnings;  // e.g. the IMU axes disagreeing with the data; shown first

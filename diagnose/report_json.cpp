@@ -21,6 +21,13 @@ json numbers(const std::vector<double>& values) {
   return list;
 }
 
+json gyro_json(const std::optional<GyroAgainstReference>& g) {
+  if (!g) return nullptr;
+  return {{"bias_rad_s", numbers({g->bias.x(), g->bias.y(), g->bias.z()})},
+          {"std_error_rad_s", numbers({g->std_error.x(), g->std_error.y(), g->std_error.z()})},
+          {"p_value", number(g->p_value)},
+          {"spans", g->spans}};
+}
 
 json parameter_json(const ParameterEstimate& p) {
   return {{"name", p.name}, {"value", number(p.value)}, {"std_error", number(p.std_error)}, {"unit", p.unit}};
@@ -145,6 +152,7 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
                     {"velocity_validation_m_s", c.velocity_validation ? number(*c.velocity_validation) : json()},
                     {"likelihood_validation", c.likelihood_validation ? number(*c.likelihood_validation) : json()},
                     {"velocity_test_p", c.velocity_test_p ? number(*c.velocity_test_p) : json()},
+                    {"attitude_test_p", c.attitude_test_p ? number(*c.attitude_test_p) : json()},
                     {"admitted_by", c.admitted_by},
                     {"rejected_by", c.rejected_by},
                     {"skipped", c.skipped}});
@@ -233,25 +241,27 @@ nlohmann::json report_json(const Diagnosis& d) {
                       {"t_start", s.t.empty() ? json(nullptr) : number(s.t.front())},
                       {"t_end", s.t.empty() ? json(nullptr) : number(s.t.back())}});
   }
-  return {{"session", d.session},
-          {"summary", summary_line(d)},
-          {"warnings", d.warnings},
-          {"imu_axes", d.imu_axes},
-          {"zero_velocity_rmse_m_s", velocity_json(d.zero_velocity)},
-          {"model", d.model},
-          {"axes", d.axes},
-          {"velocity_source", d.velocity_source},
-          {"train_window", {{"start", number(d.train_start)}, {"end", number(d.train_end)}}},
-          {"validation_window", {{"start", number(d.validate_start)}, {"end", number(d.validate_end)}}},
-          {"significance_rule", d.significance_rule},
-          {"base", fit_json(d, d.base, d.base_residual)},
-          {"steps", std::move(steps)},
-          {"last_candidates", candidates_json(d.last_candidates)},
-          {"final", fit_json(d, d.final, d.final_residual)},
-          {"residual_white", d.residual_white},
-          {"unexplained", std::move(unexplained)},
-          {"velocity_ramps", std::move(ramps)},
-          {"series", std::move(series)}};
+  return {
+      {"session", d.session},
+      {"summary", summary_line(d)},
+      {"warnings", d.warnings},
+      {"imu_axes", d.imu_axes},
+      {"zero_velocity_rmse_m_s", velocity_json(d.zero_velocity)},
+      {"gyro_against_reference", {{"train", gyro_json(d.gyro_train)}, {"validation", gyro_json(d.gyro_validation)}}},
+      {"model", d.model},
+      {"axes", d.axes},
+      {"velocity_source", d.velocity_source},
+      {"train_window", {{"start", number(d.train_start)}, {"end", number(d.train_end)}}},
+      {"validation_window", {{"start", number(d.validate_start)}, {"end", number(d.validate_end)}}},
+      {"significance_rule", d.significance_rule},
+      {"base", fit_json(d, d.base, d.base_residual)},
+      {"steps", std::move(steps)},
+      {"last_candidates", candidates_json(d.last_candidates)},
+      {"final", fit_json(d, d.final, d.final_residual)},
+      {"residual_white", d.residual_white},
+      {"unexplained", std::move(unexplained)},
+      {"velocity_ramps", std::move(ramps)},
+      {"series", std::move(series)}};
 }
 
 void write_report_json(const Diagnosis& diagnosis, const std::filesystem::path& file) {

@@ -1,8 +1,8 @@
 #include "diagnose/search.hpp"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <atomic>
-#include <Eigen/Cholesky>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <boost/math/distributions/students_t.hpp>
 #include <chrono>
@@ -15,6 +15,7 @@
 #include <tuple>
 
 #include "diagnose/effects/library.hpp"
+#include "diagnose/gyro_against_reference.hpp"
 #include "diagnose/live_model.hpp"
 #include "diagnose/lowpass.hpp"
 #include "diagnose/model.hpp"
@@ -242,6 +243,10 @@ std::string describe_rule(const DiagnoseOptions& o, bool judged_by_velocity) {
     rule +=
         "; a first drag also passes by the velocity's test (its validation velocity's gain over zero velocity's, "
         "a one-sided t-test on 1-s blocks at the same level)";
+  if (judged_by_velocity)
+    rule +=
+        "; gyro_bias is measured against the reference's attitude and passes by that attitude's test (its bias on "
+        "the validation window, chi-square at the same level)";
   return rule;
 }
 
@@ -383,6 +388,8 @@ struct Search {
   Range train, validation;
   std::size_t span_lag;     // kCorrelationSpanS in samples: how far the effective sample count looks
   bool judged_by_velocity;  // with the reference; from the IMU alone a model is judged by the filter's likelihood
+  // With the reference: the gyro's bias against its attitude on the validation window (gyro_bias's test).
+  std::optional<GyroAgainstReference> gyro_validation{};
   std::chrono::steady_clock::time_point started{};
 
   // Called from the fitting threads: options.progress must be thread-safe.
@@ -656,6 +663,9 @@ State measure_candidate(const StepContext& step, const Effect& effect, const Mod
   if (search.judged_by_velocity && search.options.flight_rules && effect.adds_drag() && !gives_velocity(current) &&
       gives_velocity(candidate))
     trial.velocity_test_p = velocity_gain_test(candidate.summary.velocity->validation_gain_over_zero).p_value;
+  // A gyro bias measured against the reference's attitude: whether the validation window shows it too.
+  if (search.setup.reference_gyro_bias && search.gyro_validation && effect.name() == "gyro_bias")
+    trial.attitude_test_p = search.gyro_validation->p_value;
   return candidate;
 }
 
@@ -757,11 +767,22 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
         !options.flight_rules || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
     // A first drag the residual's rules do not see, which the velocity it gives shows beyond chance.
     const bool velocity_shows_it = t.velocity_test_p && *t.velocity_test_p < level;
-    t.significant = ((improves && passes_f_test) || velocity_shows_it) && no_worse_flown;
-    char why[260];
+    // A gyro bias the reference's attitude shows beyond chance, which the specific force hardly does.
+    const bool attitude_shows_it = t.attitude_test_p && *t.attitude_test_p < level;
+    t.significant = ((improves && passes_f_test) || velocity_shows_it || attitude_shows_it) && no_worse_flown;
+    char why[400];
     t.rejected_by.clear();
     t.admitted_by.clear();
-    if (t.significant && !(improves && passes_f_test)) {
+    if (t.significant && !(improves && passes_f_test) && attitude_shows_it) {
+      const Eigen::Vector3d& b = *search.setup.reference_gyro_bias;
+      std::snprintf(why, sizeof why,
+                    "the reference attitude's test: the gyro reads (%.4f, %.4f, %.4f) rad/s beyond the reference's "
+                    "turn (training window), p = %.3g on the validation window, below %.3g (the specific-force "
+                    "residual %+.2f %%)",
+                    b.x(), b.y(), b.z(), *t.attitude_test_p, level,
+                    100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
+      t.admitted_by = why;
+    } else if (t.significant && !(improves && passes_f_test)) {
       std::snprintf(why, sizeof why,
                     "the velocity's test: validation velocity RMSE %.3f m/s against zero velocity's %.3f, p = %.3g, "
                     "below %.3g (the specific-force residual %+.2f %%)",
@@ -792,6 +813,11 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
     }
     if (t.velocity_test_p && !t.rejected_by.empty()) {
       std::snprintf(why, sizeof why, "; nor the velocity's test: p = %.3g, not below %.3g", *t.velocity_test_p, level);
+      t.rejected_by += why;
+    }
+    if (t.attitude_test_p && !t.rejected_by.empty()) {
+      std::snprintf(why, sizeof why, "; nor the reference attitude's test: p = %.3g, not below %.3g",
+                    *t.attitude_test_p, level);
       t.rejected_by += why;
     }
   }
@@ -966,6 +992,15 @@ Diagnosis run_diagnosis(const estimator::ImuSeries& series, const DiagnoseOption
   if (options.max_steps < 0) throw std::invalid_argument("diagnose: the number of steps cannot be negative");
   Search search = open_search(series, signals, options, setup);
   Diagnosis out = describe_request(search);
+  if (setup.velocity == VelocitySource::reference) {
+    out.gyro_train = gyro_against_reference(signals, search.train.first, search.train.count);
+    out.gyro_validation = gyro_against_reference(signals, search.validation.first, search.validation.count);
+    // Both windows, or neither: the test needs the one, the bias the other.
+    if (out.gyro_train && out.gyro_validation) {
+      setup.reference_gyro_bias = out.gyro_train->bias;
+      search.gyro_validation = out.gyro_validation;
+    }
+  }
 
   search.started = std::chrono::steady_clock::now();
   search.report_progress(0, "base", false, 0, 1);

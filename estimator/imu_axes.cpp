@@ -333,31 +333,40 @@ std::string describe(const ReferenceAlignment& a) {
   return s + ")";
 }
 
-ReferenceAlignment align_reference_frame(const ImuSeries& series, const Matrix3d& imu_to_body) {
-  if (!series.reference) throw std::invalid_argument("align_reference_frame: the series has no reference");
-  const auto& q = series.reference->attitude;
-  ReferenceAlignment out;
-  std::vector<std::pair<Vector3d, Vector3d>> pairs;  // (reference frame, IMU axes)
-  std::size_t a = 0;
-  while (a + 1 < series.size()) {
+std::vector<SpanRotation> span_rotations(std::span<const double> t, std::span<const Vector3d> gyro,
+                                         std::span<const Quaterniond> attitude, std::size_t first, std::size_t end,
+                                         double span_seconds) {
+  std::vector<SpanRotation> out;
+  end = std::min({end, t.size(), gyro.size(), attitude.size()});
+  std::size_t a = first;
+  while (a + 1 < end) {
     std::size_t b = a;
-    Quaterniond gyro = Quaterniond::Identity();
+    Quaterniond turned = Quaterniond::Identity();
     bool gap = false;
-    while (b + 1 < series.size() && series.t[b] - series.t[a] < kAlignSpanSeconds) {
-      const double dt = series.t[b + 1] - series.t[b];
+    while (b + 1 < end && t[b] - t[a] < span_seconds) {
+      const double dt = t[b + 1] - t[b];
       // A gap in the samples (a logger's dropout): the gyro did not see that rotation, so the span says nothing.
-      gap = gap || dt > kAlignSpanSeconds;
-      const Vector3d w = 0.5 * (series.gyro[b] + series.gyro[b + 1]) * dt;
+      gap = gap || dt > span_seconds;
+      const Vector3d w = 0.5 * (gyro[b] + gyro[b + 1]) * dt;
       const double angle = w.norm();
-      gyro = gyro * (angle > 0.0 ? Quaterniond(Eigen::AngleAxisd(angle, w / angle)) : Quaterniond::Identity());
+      turned = turned * (angle > 0.0 ? Quaterniond(Eigen::AngleAxisd(angle, w / angle)) : Quaterniond::Identity());
       ++b;
     }
-    if (series.t[b] - series.t[a] < kAlignSpanSeconds) break;
-    const Vector3d r_ref = log_rotation(q[a].conjugate() * q[b]);
-    const Vector3d r_imu = log_rotation(gyro);
-    if (!gap && r_ref.norm() > kAlignMinSpanAngle && r_imu.norm() > kAlignMinSpanAngle)
-      pairs.emplace_back(r_ref, r_imu);
+    if (t[b] - t[a] < span_seconds) break;
+    if (!gap) out.push_back({log_rotation(attitude[a].conjugate() * attitude[b]), log_rotation(turned), t[b] - t[a]});
     a = b;
+  }
+  return out;
+}
+
+ReferenceAlignment align_reference_frame(const ImuSeries& series, const Matrix3d& imu_to_body) {
+  if (!series.reference) throw std::invalid_argument("align_reference_frame: the series has no reference");
+  ReferenceAlignment out;
+  std::vector<std::pair<Vector3d, Vector3d>> pairs;  // (reference frame, IMU axes)
+  for (const SpanRotation& s :
+       span_rotations(series.t, series.gyro, series.reference->attitude, 0, series.size(), kAlignSpanSeconds)) {
+    if (s.reference.norm() > kAlignMinSpanAngle && s.gyro.norm() > kAlignMinSpanAngle)
+      pairs.emplace_back(s.reference, s.gyro);
   }
   out.spans = pairs.size();
   if (pairs.size() < kAlignMinSpans) return out;  // cannot_tell

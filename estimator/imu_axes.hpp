@@ -144,6 +144,20 @@ inline constexpr double kAlignSnapDegrees = 20.0;
 // below kAlignMinSpanAngle is within a span's noise: cannot tell either.
 inline constexpr double kAlignMinContrast = 2.0;
 
+// One span of a series: the rotation the reference turns through, Log(q_a^-1 q_b) (the reference's frame), and the
+// one the gyro integrates (trapezoidal, the gyro's axes), rad, over samples [a, b], b the first at least
+// `seconds` after a.
+struct SpanRotation {
+  Eigen::Vector3d reference = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();
+  double seconds = 0.0;
+};
+// Consecutive spans of at least `span_seconds` over samples [first, end); a span holding a gap in the samples longer
+// than that is left out (the gyro did not see that rotation), and so is a last span too short.
+std::vector<SpanRotation> span_rotations(std::span<const double> t, std::span<const Eigen::Vector3d> gyro,
+                                         std::span<const Eigen::Quaterniond> attitude, std::size_t first,
+                                         std::size_t end, double span_seconds);
+
 // cannot_tell: too few turning spans, or the two hypotheses explain them about equally; the IMU's frame is applied
 // and a warning says so.
 enum class ReferenceFrame { imu, body, estimated, cannot_tell };

@@ -193,6 +193,14 @@ void print_summary(const dg::Diagnosis& d) {
   for (const std::string& a : d.axes) std::printf(" %s", a.c_str());
   std::printf(", velocity %s; train %.3f:%.3f s, validate %.3f:%.3f s\n", d.velocity_source.c_str(), d.train_start,
               d.train_end, d.validate_start, d.validate_end);
+  if (d.gyro_train) {
+    const dg::GyroAgainstReference& g = *d.gyro_train;
+    std::printf(
+        "gyro against the reference's attitude (training window, %zu spans): bias (%.4f, %.4f, %.4f) +- (%.4f, "
+        "%.4f, %.4f) rad/s, p = %.3g%s\n",
+        g.spans, g.bias.x(), g.bias.y(), g.bias.z(), g.std_error.x(), g.std_error.y(), g.std_error.z(), g.p_value,
+        d.gyro_validation ? "" : " (the validation window too short to test it)");
+  }
   std::printf("base: RMSE train %.4f, validation %.4f m/s^2\n", d.base.rmse_train, d.base.rmse_validation);
   print_params(d.base.base_params, d.base.std_error_failure);
   print_velocity(d.base);

@@ -1,5 +1,6 @@
 // gyro_bias: a constant offset of the gyro. It enters the centripetal term and, through eq. (11)'s integrated tilt,
-// eq. (12)'s velocity (docs/effects.md).
+// eq. (12)'s velocity; with the reference as the velocity it is measured against the reference's attitude instead
+// (docs/effects.md).
 #include <algorithm>
 
 #include "diagnose/effects/library.hpp"
@@ -20,8 +21,10 @@ class GyroBias final : public Effect {
  public:
   std::string_view name() const override { return "gyro_bias"; }
   Stages stages() const override { return {.gyro = true}; }
+  // With the reference's attitude the bias is measured, not fitted (ModelSetup::reference_gyro_bias): no parameters.
   std::vector<Parameter> parameters(const ModelSetup& setup) const override {
     std::vector<Parameter> out;
+    if (setup.reference_gyro_bias) return out;
     for (int axis : gyro_axes(setup)) out.push_back({"bias." + axis_name(axis), "rad/s", 0.0, -1.0, 1.0});
     return out;
   }
@@ -29,6 +32,7 @@ class GyroBias final : public Effect {
   // the gyro's bias: from zero, eq. (12)'s velocity can be so far off that the fit finds no way back. The yaw may
   // turn freely and starts at zero.
   std::optional<std::string> start(const StartContext& ctx, std::span<double> p) const override {
+    if (ctx.setup.reference_gyro_bias) return std::nullopt;
     const Signals& s = *ctx.setup.signals;
     const std::size_t first =
         static_cast<std::size_t>(std::lower_bound(s.t.begin(), s.t.end(), ctx.t.front()) - s.t.begin());
@@ -44,14 +48,23 @@ class GyroBias final : public Effect {
   }
   void adjust_gyro(std::span<const double> p, const ModelSetup& setup,
                    std::vector<Eigen::Vector3d>& gyro) const override {
+    if (setup.reference_gyro_bias) {
+      for (Eigen::Vector3d& w : gyro) w -= *setup.reference_gyro_bias;
+      return;
+    }
     const std::vector<int> axes = gyro_axes(setup);
     for (Eigen::Vector3d& w : gyro) {
       for (std::size_t i = 0; i < axes.size(); ++i) w[axes[i]] -= p[i];
     }
   }
   std::string live_path(const Parameter& p) const override { return per_axis_live_path("gyro_bias", p); }
-  void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext&,
+  void to_live(std::span<const double> v, std::span<const Parameter> p, const LiveContext& context,
                estimator::FullModelParams& live) const override {
+    // Measured, the bias is known on all three axes, the ones the paper model does not use included.
+    if (context.setup.reference_gyro_bias) {
+      live.gyro_bias += *context.setup.reference_gyro_bias;
+      return;
+    }
     add_per_axis(v, p, live.gyro_bias);
   }
 };

@@ -153,19 +153,36 @@ TEST_P(FoundFirst, Wind) {
 }
 
 // A gyro bias bends eq. (11)'s tilt and so eq. (12)'s velocity: from the IMU alone it is found first. With the
-// reference it only enters the centripetal term through r cos(beta), 0.015 m at the paper's pose: invisible.
+// reference it only enters the centripetal term through r cos(beta), 0.015 m at the paper's pose, invisible in the
+// specific force; the reference's attitude shows it (gyro_against_reference), and the reference attitude's test adds
+// it, at the value measured there.
 TEST_P(FoundFirst, GyroBias) {
   const Diagnosis d = diagnose({.sim_effects = {"gyro_bias=0.02"}, .velocity = GetParam(), .max_steps = 1});
+  ASSERT_EQ(chosen(d), std::vector<std::string>{"gyro_bias"}) << test::last_candidates(d);
   if (GetParam() == VelocitySource::eq12) {
-    ASSERT_EQ(chosen(d), std::vector<std::string>{"gyro_bias"});
     EXPECT_NEAR(param(d.steps.front().params, "bias.x").value, 0.02, 0.001);
     EXPECT_NEAR(param(d.steps.front().params, "bias.y").value, 0.02, 0.001);
     // The base model cannot be worse than eq. (14) without its drag term (mu fits to 0 on the drifting velocity),
     // so the validation RMSE falls by a quarter, not a half.
     EXPECT_LE(d.final.rmse_validation, 0.8 * d.base.rmse_validation);
   } else {
-    EXPECT_TRUE(d.steps.empty());
+    ASSERT_TRUE(d.gyro_train.has_value());
+    EXPECT_NEAR(d.gyro_train->bias.x(), 0.02, 0.001);
+    EXPECT_NEAR(d.gyro_train->bias.y(), 0.02, 0.001);
+    EXPECT_NEAR(d.final_params.full.gyro_bias.x(), 0.02, 0.001);
+    const auto added = std::find_if(d.steps.front().candidates.begin(), d.steps.front().candidates.end(),
+                                    [](const CandidateTrial& c) { return c.effect == "gyro_bias"; });
+    ASSERT_NE(added, d.steps.front().candidates.end());
+    EXPECT_NE(added->admitted_by.find("reference attitude's test"), std::string::npos) << added->admitted_by;
   }
+}
+
+// The same flight without the bias: the reference's attitude shows none, and nothing is added for it.
+TEST(FoundFirst, NoGyroBiasWhereTheReferenceShowsNone) {
+  const Diagnosis d = diagnose({.sim_effects = {}, .velocity = VelocitySource::reference, .max_steps = 1});
+  ASSERT_TRUE(d.gyro_validation.has_value());
+  EXPECT_GT(d.gyro_validation->p_value, 0.01);
+  for (const Step& s : d.steps) EXPECT_NE(s.effect, "gyro_bias");
 }
 
 // On seed 9 the fit from the IMU alone once took a gyro bias of -0.53 rad/s on one axis: the attitude it integrates
