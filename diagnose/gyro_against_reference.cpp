@@ -43,9 +43,8 @@ std::optional<GyroAgainstReference> gyro_against_reference(const Signals& signal
     for (std::size_t k = 0; k < n; ++k) y[static_cast<Eigen::Index>(k)] = excess[k][axis];
     const Eigen::VectorXd c = normal_inverse * (design.transpose() * y);
     const Eigen::VectorXd residual = y - design * c;
-    const std::vector<double> r(residual.data(), residual.data() + residual.size());
     // The spans' residuals correlate where the reference's own filtering or delay spans several of them.
-    const double n_eff = effective_samples(r, n / 2);
+    const double n_eff = effective_samples({residual.data(), n}, n / 2);
     const double variance = residual.squaredNorm() / dof;
     out.bias[axis] = c[0];
     out.std_error[axis] = std::sqrt(variance * normal_inverse(0, 0) * static_cast<double>(n) / n_eff);

@@ -30,10 +30,9 @@ struct GyroAgainstReference {
 };
 
 // Over samples [first, first + count) of `signals` (which need a reference): per span, the gyro's turn less the
-// reference's, e = (Log(R_gyro) - Log(R_ref)) / dt, regressed per axis on the reference's mean rate,
-// e = b + m . omega, so that a reference frame turned slightly from the
-// gyro's (the mounting the model fits, a scale error) reads as m and not as a bias; b is the bias. nullopt without a
-// reference or with fewer than kGyroMinSpans spans.
+// reference's, e = (Log(R_gyro) - Log(R_ref)) / dt, regressed per axis on the reference's mean rate, e = b + m . omega,
+// so that a reference frame turned slightly from the gyro's (the mounting the model fits, a scale error) reads as m and
+// not as a bias; b is the bias. nullopt without a reference or with fewer than kGyroMinSpans spans.
 std::optional<GyroAgainstReference> gyro_against_reference(const Signals& signals, std::size_t first,
                                                            std::size_t count);
 

@@ -769,11 +769,13 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
     const bool velocity_shows_it = t.velocity_test_p && *t.velocity_test_p < level;
     // A gyro bias the reference's attitude shows beyond chance, which the specific force hardly does.
     const bool attitude_shows_it = t.attitude_test_p && *t.attitude_test_p < level;
-    t.significant = ((improves && passes_f_test) || velocity_shows_it || attitude_shows_it) && no_worse_flown;
+    const bool residual_shows_it = improves && passes_f_test;
+    const bool shown = residual_shows_it || velocity_shows_it || attitude_shows_it;
+    t.significant = shown && no_worse_flown;
     char why[400];
     t.rejected_by.clear();
     t.admitted_by.clear();
-    if (t.significant && !(improves && passes_f_test) && attitude_shows_it) {
+    if (t.significant && !residual_shows_it && attitude_shows_it) {
       const Eigen::Vector3d& b = *search.setup.reference_gyro_bias;
       std::snprintf(why, sizeof why,
                     "the reference attitude's test: the gyro reads (%.4f, %.4f, %.4f) rad/s beyond the reference's "
@@ -782,7 +784,7 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
                     b.x(), b.y(), b.z(), *t.attitude_test_p, level,
                     100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
       t.admitted_by = why;
-    } else if (t.significant && !(improves && passes_f_test)) {
+    } else if (t.significant && !residual_shows_it) {
       std::snprintf(why, sizeof why,
                     "the velocity's test: validation velocity RMSE %.3f m/s against zero velocity's %.3f, p = %.3g, "
                     "below %.3g (the specific-force residual %+.2f %%)",
@@ -791,12 +793,13 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
       t.admitted_by = why;
     }
     if (t.significant) continue;
-    if (improves && passes_f_test && !no_worse_flown && search.judged_by_velocity) {
+    // Shown by one test or another, and refused for how it flies: that rule is the reason, whichever test showed it.
+    if (shown && search.judged_by_velocity) {
       std::snprintf(why, sizeof why,
                     "velocity rule: validation velocity RMSE %.3f -> %.3f m/s (a step must not raise it)",
                     *before.velocity, *t.velocity_validation);
       t.rejected_by = why;
-    } else if (improves && passes_f_test && !no_worse_flown) {
+    } else if (shown) {
       std::snprintf(why, sizeof why,
                     "likelihood rule: the filter's validation log-likelihood %.4f -> %.4f per measurement (a step "
                     "must not lower it)",
@@ -811,11 +814,11 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
                     options.significance, out.tried);
       t.rejected_by = why;
     }
-    if (t.velocity_test_p && !t.rejected_by.empty()) {
+    if (t.velocity_test_p && !velocity_shows_it && !t.rejected_by.empty()) {
       std::snprintf(why, sizeof why, "; nor the velocity's test: p = %.3g, not below %.3g", *t.velocity_test_p, level);
       t.rejected_by += why;
     }
-    if (t.attitude_test_p && !t.rejected_by.empty()) {
+    if (t.attitude_test_p && !attitude_shows_it && !t.rejected_by.empty()) {
       std::snprintf(why, sizeof why, "; nor the reference attitude's test: p = %.3g, not below %.3g",
                     *t.attitude_test_p, level);
       t.rejected_by += why;

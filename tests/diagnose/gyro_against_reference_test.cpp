@@ -13,18 +13,13 @@
 namespace imubridge::diagnose {
 namespace {
 
-Eigen::Matrix3d exp_map(const Eigen::Vector3d& v) {
-  const double angle = v.norm();
-  return angle > 0.0 ? Eigen::Matrix3d(Eigen::AngleAxisd(angle, v / angle)) : Eigen::Matrix3d::Identity();
-}
-
 // 60 s at 200 Hz of a body turning about all three axes; the reference's attitude is the body's, the gyro reads
 // the rate in a frame turned by `misalignment` (rotation vector) from it, plus `bias` and white noise.
 Signals turning_flight(const Eigen::Vector3d& bias, const Eigen::Vector3d& misalignment, std::uint64_t seed) {
   constexpr double kRate = 200.0, kSeconds = 60.0;
   std::mt19937_64 random(seed);
   std::normal_distribution<double> noise(0.0, 0.01);  // rad/s per sample
-  const Eigen::Matrix3d gyro_from_body = exp_map(misalignment);
+  const Eigen::Matrix3d gyro_from_body = rotation_matrix(misalignment);
   Signals s;
   s.reference.emplace();
   Eigen::Quaterniond attitude = Eigen::Quaterniond::Identity();
@@ -35,7 +30,7 @@ Signals turning_flight(const Eigen::Vector3d& bias, const Eigen::Vector3d& misal
     s.t.push_back(t);
     s.reference->attitude.push_back(attitude);
     s.gyro.push_back(gyro_from_body * rate + bias + Eigen::Vector3d(noise(random), noise(random), noise(random)));
-    attitude = (attitude * Eigen::Quaterniond(exp_map(rate / kRate))).normalized();
+    attitude = (attitude * Eigen::Quaterniond(rotation_matrix(rate / kRate))).normalized();
   }
   return s;
 }
