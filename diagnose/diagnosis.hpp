@@ -77,8 +77,8 @@ struct ModelFit {
   // Parameters at or within 1 % of a bound of their search range: the data pushed them there, so their value says
   // more about the range than about the vehicle. One readable line each.
   std::vector<std::string> at_bounds;
-  // Values beyond the plausibility table (identification/plausibility.hpp), one line each (a candidate with any is refused;
-  // the base model is reported with them).
+  // Values beyond the plausibility table (identification/plausibility.hpp), one line each (a candidate with any is
+  // refused; the base model is reported with them).
   std::vector<std::string> implausible;
   std::optional<estimator::VelocityScores> velocity;  // the estimator run with this model; with a reference only
   // The filter's log-likelihood of the accelerometer with this model (estimator::filter_log_likelihood); from the IMU
@@ -116,6 +116,10 @@ struct CandidateTrial {
   std::string skipped;  // non-empty: why this effect was not tried (does not apply to this data, failed to fit,
                         // physically implausible)
   std::vector<std::string> with{};  // effects it needs (Effect::needs), fitted and added together with it
+  // Its fit was past the plausibility table on an axis that, held at zero, clears it (search.cpp,
+  // axes_to_hold): those parameters (ModelSetup::held_at_zero's names) and a line saying so. Empty otherwise.
+  std::vector<std::string> held_at_zero{};
+  std::string held{};
 };
 
 struct Step {
@@ -126,6 +130,9 @@ struct Step {
   std::vector<CandidateTrial> candidates;  // every candidate tried at this step, best validation RMSE first
   std::vector<ResidualAnalysis> residual;  // validation residual after this step, one per axis diagnosed
   std::vector<std::string> with{};         // the effects it needed, added with it before it
+  // The axes a candidate held at zero (CandidateTrial::held), fitted again free once this step's effect was in and
+  // kept so (search.cpp, release_holds): which, and their values. Empty otherwise.
+  std::string released{};
 };
 
 // Structure left in the final residual that no library effect took away.

@@ -70,7 +70,6 @@ std::string percent_change(double before, double after) {
   return signed_num(100.0 * (after - before) / before, 3) + " %";
 }
 
-
 std::string window_text(double start, double end) {
   return num(start, 6) + " – " + num(end, 6) + " s (" + num(end - start, 4) + " s)";
 }
@@ -359,8 +358,9 @@ void candidates_table(const std::vector<CandidateTrial>& candidates, const std::
   for (const auto& c : candidates) {
     const bool tried = c.skipped.empty();
     const bool is_chosen = tried && !chosen.empty() && c.effect == chosen;
-    rows.push_back({escape(with_needed(c.effect, c.with)), tried ? num(c.rmse_train) : "",
-                    tried ? num(c.rmse_validation) : "", tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
+    const std::string effect = with_needed(c.effect, c.with) + (c.held.empty() ? "" : " (with " + c.held + ")");
+    rows.push_back({escape(effect), tried ? num(c.rmse_train) : "", tried ? num(c.rmse_validation) : "",
+                    tried ? num(c.statistic) : "", tried ? p_value(c.p_value) : "",
                     tried ? (c.significant ? "yes" : "no") : "",
                     is_chosen ? (c.admitted_by.empty() ? "chosen" : "chosen by " + escape(c.admitted_by))
                               : escape(tried ? c.rejected_by : "not tried: " + c.skipped)});

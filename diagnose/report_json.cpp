@@ -154,6 +154,8 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
                     {"velocity_test_p", c.velocity_test_p ? number(*c.velocity_test_p) : json()},
                     {"attitude_test_p", c.attitude_test_p ? number(*c.attitude_test_p) : json()},
                     {"admitted_by", c.admitted_by},
+                    {"held_at_zero", c.held_at_zero},
+                    {"held", c.held},
                     {"rejected_by", c.rejected_by},
                     {"skipped", c.skipped}});
   }
@@ -163,6 +165,7 @@ json candidates_json(const std::vector<CandidateTrial>& candidates) {
 json step_json(const Diagnosis& d, const Step& step) {
   return {{"effect", step.effect},
           {"with", step.with},
+          {"released", step.released},
           {"params", parameters_json(step.params)},
           {"rmse_train", number(step.fit.rmse_train)},
           {"rmse_validation", number(step.fit.rmse_validation)},

@@ -78,11 +78,16 @@ std::optional<std::string> unflyable(const Model& model, std::span<const double>
 std::optional<std::string> undetermined(const Model& model, const FitOutcome& fit, std::size_t first) {
   // An effect with no parameters of its own (the measured thrust in place of g, a self-consistent velocity) has
   // nothing the data must determine: the other rules judge it.
-  if (first >= fit.values.size()) return std::nullopt;
-  const auto n = static_cast<Eigen::Index>(fit.values.size() - first);
+  // A parameter held at its only value (an axis held at zero) is not the data's to determine.
+  std::vector<std::size_t> free;
+  for (std::size_t k = first; k < fit.values.size(); ++k) {
+    if (!model.inert(k)) free.push_back(k);
+  }
+  if (free.empty()) return std::nullopt;
+  const auto n = static_cast<Eigen::Index>(free.size());
   Eigen::VectorXd value(n), se(n);
   for (Eigen::Index i = 0; i < n; ++i) {
-    const auto k = first + static_cast<std::size_t>(i);
+    const std::size_t k = free[static_cast<std::size_t>(i)];
     se[i] = fit.std_errors.empty() ? std::numeric_limits<double>::quiet_NaN() : fit.std_errors[k];
     if (!std::isfinite(se[i])) {
       return "undetermined: the standard error of " + model.parameters()[k].name + " cannot be computed (" +
@@ -92,10 +97,14 @@ std::optional<std::string> undetermined(const Model& model, const FitOutcome& fi
     value[i] = fit.values[k];
   }
   // The covariance block from the correlations, or from the standard errors alone when there are none.
-  const auto f = static_cast<Eigen::Index>(first);
-  const Eigen::MatrixXd correlation = fit.correlation.rows() == static_cast<Eigen::Index>(fit.values.size())
-                                          ? Eigen::MatrixXd(fit.correlation.block(f, f, n, n))
-                                          : Eigen::MatrixXd::Identity(n, n);
+  Eigen::MatrixXd correlation = Eigen::MatrixXd::Identity(n, n);
+  if (fit.correlation.rows() == static_cast<Eigen::Index>(fit.values.size())) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      for (Eigen::Index j = 0; j < n; ++j)
+        correlation(i, j) = fit.correlation(static_cast<Eigen::Index>(free[static_cast<std::size_t>(i)]),
+                                            static_cast<Eigen::Index>(free[static_cast<std::size_t>(j)]));
+    }
+  }
   const Eigen::LDLT<Eigen::MatrixXd> ldlt(se.asDiagonal() * correlation * se.asDiagonal());
   // A singular block (a pivot of zero or less) determines nothing.
   const double wald =
@@ -149,6 +158,7 @@ struct State {
   ModelFit summary;
   AxisValues train_residual, validation_residual;
   std::vector<std::string> implausible_limits;  // the plausibility limits this model already exceeds
+  std::vector<std::string> held_at_zero;        // its effects' axes held at zero (ModelSetup::held_at_zero's names)
   estimator::ModelParams params;                // the model as the live estimator runs it
 };
 
@@ -162,19 +172,25 @@ ParameterEstimate estimate(const Parameter& p, const FitOutcome& fit, std::size_
   return {p.name, fit.values[i], fit.std_errors[i], p.unit};
 }
 
+// The base, or the effect a parameter of `model` belongs to, by name.
+std::string owner_of(const Model& model, std::size_t i) {
+  for (std::size_t e = 0; e < model.effects().size() && i >= model.base_size(); ++e) {
+    if (i < model.effect_offset(e + 1)) return std::string(model.effects()[e]->name());
+  }
+  return "base";
+}
+
 std::vector<std::string> at_bounds(const Model& model, std::span<const double> values) {
   std::vector<std::string> owners;
-  for (std::size_t i = 0; i < model.parameters().size(); ++i) {
-    std::string owner = "base";
-    for (std::size_t e = 0; e < model.effects().size() && i >= model.base_size(); ++e) {
-      if (i < model.effect_offset(e) + model.effect_size(e)) {
-        owner = model.effects()[e]->name();
-        break;
-      }
-    }
-    owners.push_back(owner);
-  }
+  for (std::size_t i = 0; i < model.parameters().size(); ++i) owners.push_back(owner_of(model, i));
   return parameters_at_bounds(model.parameters(), values, owners);
+}
+
+// The effects' parameters held at zero (ModelSetup::held_at_zero): none of them is free.
+std::size_t held_effect_parameters(const Model& model) {
+  std::size_t held = 0;
+  for (std::size_t i = model.base_size(); i < model.parameters().size(); ++i) held += model.inert(i);
+  return held;
 }
 
 ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range validation) {
@@ -189,7 +205,7 @@ ModelFit describe(const Model& model, const FitOutcome& fit, Range train, Range 
       list.push_back(estimate(params[i], fit, i));
     out.effect_params.push_back(std::move(list));
   }
-  out.free_parameters = params.size();
+  out.free_parameters = params.size() - held_effect_parameters(model);
   out.rmse_train = model.rmse(fit.values, train);
   out.rmse_validation = model.rmse(fit.values, validation);
   out.convergence = fit.convergence;
@@ -602,7 +618,7 @@ std::vector<double> screened_start(const Search& search, const Effect& effect,
     std::vector<std::future<FitOutcome>> screened;
     for (std::size_t i = 0; i < starts.size(); ++i) {
       screened.push_back(std::async(std::launch::async, [&, i] {
-        const Model own(search.signals, search.setup, effects);
+        const Model own(search.signals, model.setup(), effects);
         return fit(own, starts[i], search.train, kScreenIterations);
       }));
     }
@@ -613,6 +629,51 @@ std::vector<double> screened_start(const Search& search, const Effect& effect,
     }
   }
   return chosen_start;
+}
+
+// The new effects' parameters (from `first` on) to hold at zero when `values` are implausible: each whose own value,
+// set to zero, clears a per-axis limit they exceed, provided its effect keeps a free parameter. A value past the
+// table on one axis (a drag of 2.3 1/s on y while the time offset is missing) is not what the data place there; the
+// effect may still be there on the others. Empty when no such parameter clears it.
+std::vector<std::size_t> axes_to_hold(const Search& search, const Model& model, const std::vector<double>& values,
+                                      std::size_t first) {
+  const auto per_axis_exceeded = [&](const std::vector<double>& v) {
+    const std::vector<estimator::Implausibility> all =
+        estimator::check_plausibility(live_params(model, v).full, search.options.limits);
+    return std::count_if(all.begin(), all.end(), [](const estimator::Implausibility& i) { return i.per_axis; });
+  };
+  const auto exceeded = per_axis_exceeded(values);
+  std::vector<std::size_t> hold;
+  for (std::size_t e = 0; e < model.effects().size(); ++e) {
+    if (model.effect_offset(e) < first) continue;
+    std::vector<std::size_t> clears;
+    std::size_t free = 0;
+    for (std::size_t i = model.effect_offset(e); i < model.effect_offset(e + 1); ++i) {
+      if (model.inert(i)) continue;
+      ++free;
+      std::vector<double> zeroed = values;
+      zeroed[i] = 0.0;
+      if (per_axis_exceeded(zeroed) < exceeded) clears.push_back(i);
+    }
+    if (!clears.empty() && clears.size() < free) hold.insert(hold.end(), clears.begin(), clears.end());
+  }
+  return hold;
+}
+
+// ModelSetup::held_at_zero's names of `hold` (parameters of `model`), appended to `names`, and a line saying what
+// each was fitted to (`values`).
+std::string hold_names(const Model& model, std::span<const double> values, const std::vector<std::size_t>& hold,
+                       std::vector<std::string>& names) {
+  std::string note;
+  for (std::size_t i : hold) {
+    const Parameter& p = model.parameters()[i];
+    names.push_back(held_name(owner_of(model, i), p.name));
+    char text[200];
+    std::snprintf(text, sizeof text, "%s%s held at 0 (its fit, %.4g %s, went past the plausibility table)",
+                  note.empty() ? "" : "; ", p.name.c_str(), values[i], p.unit.c_str());
+    note += text;
+  }
+  return note + ", and the rest fitted again without it";
 }
 
 // Why a fitted candidate is refused whatever its gain (it tilts past a flight's attitude, it is implausible, or,
@@ -641,7 +702,7 @@ std::optional<std::string> refused_fit(const StepContext& step, const Model& mod
 // The fitted candidate as a model: judged (flown as the current model when the live estimator does not run its
 // effect), with its errors and the significance rule's F-test against the current model written into `trial`.
 State measure_candidate(const StepContext& step, const Effect& effect, const Model& model, FitOutcome best,
-                        std::size_t offset, CandidateTrial& trial) {
+                        CandidateTrial& trial) {
   const Search& search = step.search;
   const State& current = step.current;
   State candidate = settle(model, std::move(best), search.train, search.validation);
@@ -652,9 +713,12 @@ State measure_candidate(const StepContext& step, const Effect& effect, const Mod
   if (candidate.summary.likelihood) trial.likelihood_validation = candidate.summary.likelihood->validation;
   double n_eff = 0.0;
   for (const std::vector<double>& r : candidate.validation_residual) n_eff += effective_samples(r, search.span_lag);
+  // Free parameters: one the current model held at zero and the candidate fits again is one more, a new one held one
+  // fewer.
+  const std::size_t free = candidate.summary.free_parameters;
   const FTest test =
       validation_f_test(sum_of_squares(current.validation_residual), sum_of_squares(candidate.validation_residual),
-                        model.parameters().size() - offset, model.parameters().size(), n_eff);
+                        free - std::min(free, current.summary.free_parameters), free, n_eff);
   trial.statistic = test.statistic;
   trial.p_value = test.p_value;
   // A first drag, with the reference: the current model gives the user no velocity (zero velocity's, its note says),
@@ -683,7 +747,12 @@ std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext&
   try {
     // The effects it needs first (a compound candidate), then the effect itself.
     const std::vector<const Effect*> effects = candidate_effects(step, effect, trial);
-    const Model model(search.signals, search.setup, effects);
+    // The current model's axes held at zero stay held: the candidate is that model plus the effect (release_holds
+    // frees them once a step is taken).
+    ModelSetup setup = search.setup;
+    setup.held_at_zero.insert(setup.held_at_zero.end(), step.current.held_at_zero.begin(),
+                              step.current.held_at_zero.end());
+    const Model model(search.signals, setup, effects);
     // Warm start: the current values, then each new effect's own start.
     std::vector<double> start = step.current.fit.values;
     const std::size_t offset = start.size();
@@ -693,12 +762,32 @@ std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext&
     }
     FitOutcome best = fit(model, screened_start(search, effect, effects, model, start), search.train, 50, FitStop::cost,
                           jacobian_threads);
-    if (auto why = refused_fit(step, model, best, offset)) {
+    std::optional<std::string> why = refused_fit(step, model, best, offset);
+    if (why && why->starts_with("implausible")) {
+      // Only the new effects' axes: a value the current model has placed is not given up for a new effect's sake.
+      if (const std::vector<std::size_t> hold = axes_to_hold(search, model, best.values, offset); !hold.empty()) {
+        trial.held = hold_names(model, best.values, hold, trial.held_at_zero);
+        setup.held_at_zero.insert(setup.held_at_zero.end(), trial.held_at_zero.begin(), trial.held_at_zero.end());
+        const Model held(search.signals, setup, effects);
+        FitOutcome refit = fit(held, best.values, search.train, 50, FitStop::cost, jacobian_threads);
+        if (auto still = refused_fit(step, held, refit, offset)) {
+          trial.skipped = *why + "; and with " + trial.held + ": " + *still;
+          return {trial, std::nullopt};
+        }
+        State candidate = measure_candidate(step, effect, held, std::move(refit), trial);
+        candidate.held_at_zero = step.current.held_at_zero;
+        candidate.held_at_zero.insert(candidate.held_at_zero.end(), trial.held_at_zero.begin(),
+                                      trial.held_at_zero.end());
+        return {trial, std::move(candidate)};
+      }
+    }
+    if (why) {
       trial.skipped = *why;
       return {trial, std::nullopt};
     }
     // Two statements: `trial` is copied into the pair only once measure_candidate has filled it.
-    State candidate = measure_candidate(step, effect, model, std::move(best), offset, trial);
+    State candidate = measure_candidate(step, effect, model, std::move(best), trial);
+    candidate.held_at_zero = step.current.held_at_zero;
     return {trial, std::move(candidate)};
   } catch (const std::exception& e) {
     trial.skipped = std::string("failed to fit: ") + e.what();
@@ -877,6 +966,47 @@ std::vector<std::size_t> rank_candidates(const Search& search, const std::vector
   return order;
 }
 
+// A step's model with axes held at zero, fitted again with them free now that the step's effect is in (a drag past
+// the table on one axis until the time offset was in): kept when it is plausible and flies and fits no worse, with
+// a line saying so. A drag released starts from the scan a new drag starts from.
+std::optional<State> release_holds(const Search& search, const State& held, std::string& note) {
+  if (held.held_at_zero.empty() || held.effects.back()->live_refusal()) return std::nullopt;
+  const Model model(search.signals, search.setup, held.effects);
+  std::vector<double> start = held.fit.values;
+  std::vector<std::size_t> released, drag;
+  for (std::size_t i = model.base_size(); i < start.size(); ++i) {
+    const std::string owner = owner_of(model, i);
+    if (std::find(held.held_at_zero.begin(), held.held_at_zero.end(), held_name(owner, model.parameters()[i].name)) ==
+        held.held_at_zero.end())
+      continue;
+    released.push_back(i);
+    if (find_effect(owner)->adds_drag()) drag.push_back(i);
+  }
+  if (!drag.empty() && search.setup.velocity == VelocitySource::filter)
+    model.scan_drag_start(start, drag, search.train);
+  State out =
+      settle(model, fit(model, start, search.train, 50, FitStop::cost, cores()), search.train, search.validation);
+  judge(search, model, out);
+  for (const std::string& limit : out.implausible_limits) {
+    if (std::find(held.implausible_limits.begin(), held.implausible_limits.end(), limit) ==
+        held.implausible_limits.end())
+      return std::nullopt;
+  }
+  const std::optional<double> before = before_step(held, search.judged_by_velocity).flight;
+  const std::optional<double> after = before_step(out, search.judged_by_velocity).flight;
+  if ((before && after && !flies_no_worse(*after, *before, search.options)) ||
+      out.summary.rmse_validation > held.summary.rmse_validation)
+    return std::nullopt;
+  for (std::size_t i : released) {
+    char text[160];
+    std::snprintf(text, sizeof text, "%s%s %s fitted again with the step's effect in: %.4g %s",
+                  note.empty() ? "" : "; ", owner_of(model, i).c_str(), model.parameters()[i].name.c_str(),
+                  out.fit.values[i], model.parameters()[i].unit.c_str());
+    note += text;
+  }
+  return out;
+}
+
 // One step of the greedy search from `current`: the best candidate, when it passes the rules, becomes `current` and
 // out.steps' last. False when none does, with the candidates in out.last_candidates.
 bool take_step(const Search& search, int step_index, State& current, Diagnosis& out) {
@@ -895,6 +1025,7 @@ bool take_step(const Search& search, int step_index, State& current, Diagnosis& 
   s.rmse_train_before = current.summary.rmse_train;
   s.rmse_validation_before = current.summary.rmse_validation;
   current = std::move(*trials.fitted[order.front()]);  // judged when it was tried
+  if (std::optional<State> released = release_holds(search, current, s.released)) current = std::move(*released);
   s.fit = current.summary;
   s.params = current.summary.effect_params.back();
   s.candidates = std::move(sorted);

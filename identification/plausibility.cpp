@@ -34,14 +34,14 @@ const LimitEntry& entry(const char* name) {
 }
 
 void check(std::vector<Implausibility>& out, const PlausibilityLimits& limits, const char* name, const char* what,
-           double value) {
+           double value, bool per_axis = true) {
   const LimitEntry& e = entry(name);
   const double bound = limits.*(e.member);
   if (!(std::abs(value) > bound)) return;
   char text[200];
   std::snprintf(text, sizeof text, "%s %.4g %s exceeds its plausible limit %g %s (--limit %s=VALUE to change it)", what,
                 value, e.unit, bound, e.unit, name);
-  out.push_back({name, value, bound, text});
+  out.push_back({name, value, bound, text, per_axis});
 }
 
 const char* const kAxis[] = {"x", "y", "z"};
@@ -66,8 +66,8 @@ std::vector<std::string> negligible_drag(const FullModelParams& p) {
 
 std::vector<Implausibility> check_plausibility(const FullModelParams& p, const PlausibilityLimits& limits) {
   std::vector<Implausibility> out;
-  check(out, limits, "lever_arm", "lever arm |r|", p.lever_arm.norm());
-  check(out, limits, "wind", "wind speed", p.wind.norm());
+  check(out, limits, "lever_arm", "lever arm |r|", p.lever_arm.norm(), false);
+  check(out, limits, "wind", "wind speed", p.wind.norm(), false);
   for (int i = 0; i < 3; ++i) {
     const std::string axis = kAxis[i];
     check(out, limits, "accel_scale", ("accelerometer scale error " + axis).c_str(), p.accel_scale[i]);
@@ -78,7 +78,7 @@ std::vector<Implausibility> check_plausibility(const FullModelParams& p, const P
       check(out, limits, "accel_cross", ("cross-axis coupling " + axis + kAxis[j]).c_str(), p.accel_cross(i, j));
     }
   }
-  check(out, limits, "time_offset", "accelerometer-gyro time offset", p.time_offset);
+  check(out, limits, "time_offset", "accelerometer-gyro time offset", p.time_offset, false);
   for (int i = 0; i < 2; ++i) {
     const std::string axis = kAxis[i];
     check(out, limits, "drag_linear", ("linear drag k." + axis).c_str(), p.drag_linear[i]);

@@ -40,6 +40,9 @@ struct Implausibility {
   double value = 0.0;
   double bound = 0.0;
   std::string message;
+  // A limit on one axis's value (a drag coefficient, a scale, a bias, a coupling), not on a vector's length or a
+  // scalar: the axis alone can be held at zero (diagnose does, for an axis the flight hardly excites).
+  bool per_axis = false;
 };
 
 // Every limit the model's values exceed (an empty list: plausible).

@@ -211,8 +211,10 @@ void print_summary(const dg::Diagnosis& d) {
                 dg::with_needed(s.effect, s.with).c_str(), s.rmse_train_before, s.fit.rmse_train,
                 s.rmse_validation_before, s.fit.rmse_validation);
     for (const dg::CandidateTrial& c : s.candidates) {
+      if (c.effect == s.effect && !c.held.empty()) std::printf("  with %s\n", c.held.c_str());
       if (c.effect == s.effect && !c.admitted_by.empty()) std::printf("  added by %s\n", c.admitted_by.c_str());
     }
+    if (!s.released.empty()) std::printf("  then %s\n", s.released.c_str());
     print_params(s.params, s.fit.std_error_failure);
     print_velocity(s.fit);
     print_fit_flags(s.fit);

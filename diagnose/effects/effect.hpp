@@ -54,7 +54,15 @@ struct ModelSetup {
   // window (gyro_against_reference), rad/s, the signals' axes. gyro_bias then takes it instead of fitting one the
   // specific force hardly shows.
   std::optional<Eigen::Vector3d> reference_gyro_bias;
+  // Effect parameters held at zero, their absence, by held_name: one axis of an effect whose fit went past the
+  // plausibility table on it while its other axes stayed inside (diagnose/search.cpp, axes_to_hold).
+  std::vector<std::string> held_at_zero{};
 };
+
+// How ModelSetup::held_at_zero names an effect's parameter: "linear_drag.k.y".
+inline std::string held_name(std::string_view effect, std::string_view parameter) {
+  return std::string(effect) + "." + std::string(parameter);
+}
 
 // The stages an effect acts in. One declaration: the model calls only these stages' hooks, and reads from it which
 // effects change its inputs (stages 1-3) and which add to the drag law, so no separate flag can disagree with them.
