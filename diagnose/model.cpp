@@ -46,7 +46,7 @@ std::vector<Parameter> base_parameters(const ModelSetup& setup) {
       out.push_back({a + "r", "m", 0.0, 0.0, setup.lever_arm_bound});
       out.push_back({.name = a + "beta", .unit = "rad", .periodic = true});
       out.push_back({.name = a + "alpha", .unit = "rad", .periodic = true});
-      out.push_back({a + "mu", "1/m", 0.0, 0.0});
+      out.push_back({a + "mu", "1/m", 0.0, 0.0, setup.drag_bound});
     }
   } else {
     for (int i = 0; i < 3; ++i)

@@ -394,7 +394,7 @@ ModelSetup set_up_model(const Signals& signals, DiagnoseOptions& options) {
 }
 
 // What every part of the search reads: the data, the options as the search runs them, the model's setup and the
-// windows. `setup` changes only while the base is fitted (fit_plausible_base narrows its lever-arm bound).
+// windows. `setup` changes only while the base is fitted (fit_plausible_base narrows its lever-arm or drag bound).
 struct Search {
   const estimator::ImuSeries& series;
   const Signals& signals;
@@ -531,12 +531,25 @@ void refit_base_inside_table(const Search& search, ModelSetup& setup, State& cur
 }
 
 // The base model the search starts from: fitted, and fitted again inside the plausibility table when its lever arm
-// is beyond it (saying so in `warnings`).
+// or the paper model's mu is beyond it (saying so in `warnings`).
 State fit_plausible_base(const Search& search, ModelSetup& setup, std::vector<std::string>& warnings) {
   State current = fit_base(search);
   const bool lever_arm_implausible = std::find(current.implausible_limits.begin(), current.implausible_limits.end(),
                                                "lever_arm") != current.implausible_limits.end();
   if (lever_arm_implausible) refit_base_inside_table(search, setup, current, warnings);
+  // The paper model's mu past the table (a drag no multirotor cruises against): fitted again within it, as the lever
+  // arm; at the table's edge it is flagged there (at_bounds) for what it is.
+  const auto& limits = current.implausible_limits;
+  if (std::find(limits.begin(), limits.end(), "drag_quadratic") != limits.end() &&
+      search.options.model == ModelKind::paper) {
+    setup.drag_bound = search.options.limits.drag_quadratic;
+    char text[480];
+    std::snprintf(text, sizeof text,
+                  "the base model's first fit was implausible (%s); it was fitted again with mu within [0, %g] 1/m",
+                  current.summary.implausible.front().c_str(), setup.drag_bound);
+    warnings.emplace_back(text);
+    current = fit_base(search);
+  }
   return current;
 }
 

@@ -50,6 +50,8 @@ struct ModelSetup {
   // The base model's lever arm is searched within +-this per component, m (the paper's r within [0, this]);
   // infinite unless a fit ran beyond the plausibility table (diagnose then refits the base inside it).
   double lever_arm_bound = std::numeric_limits<double>::infinity();
+  // The paper model's mu is searched within [0, this], 1/m; infinite unless its fit ran beyond the plausibility table.
+  double drag_bound = std::numeric_limits<double>::infinity();
   // With the reference as the velocity: the gyro's bias measured against the reference's attitude on the training
   // window (gyro_against_reference), rad/s, the signals' axes. gyro_bias then takes it instead of fitting one the
   // specific force hardly shows.

@@ -79,6 +79,34 @@ TEST(DiagnoseRules, AnAxisPastThePlausibilityTableIsHeldAtZeroUntilTheModelPlace
   EXPECT_NEAR(d.final_params.full.time_offset, 0.01, 0.001);
 }
 
+// A hidden wind raises the paper model's mu on y past the table (0.49 1/m; tests/cli/cli_loop_test.cpp's flight),
+// which was carried on with a warning. Fitted again within the table, the base is plausible (the CLI's loop on that
+// flight still adds the wind and the time offset: LoopToEstimator).
+TEST(DiagnoseRules, AnImplausiblePaperDragIsFittedAgainInsideThePlausibilityTable) {
+  DiagnoseOptions o = options(VelocitySource::reference, 2);
+  o.model = ModelKind::paper;
+  o.train = estimator::TimeWindow{0.0, 24.0};
+  o.validate = estimator::TimeWindow{24.0, 40.0};
+  const Diagnosis d =
+      run_diagnosis(sim::imu_series(sim::simulate(sim::make_scenario(
+                        "paper", 11, 40.0, std::vector<std::string>{"wind=3,1.5", "time_offset=0.02"}))),
+                    o);
+  EXPECT_TRUE(d.base.implausible.empty()) << d.base.implausible.front();
+  const bool said = std::any_of(d.warnings.begin(), d.warnings.end(), [](const std::string& w) {
+    return w.find("first fit was implausible") != std::string::npos &&
+           w.find("mu within [0, 0.4]") != std::string::npos;
+  });
+  EXPECT_TRUE(said);
+  for (const ParameterEstimate& p : d.base.base_params) {
+    if (p.unit == "1/m") {
+      EXPECT_LE(p.value, 0.4) << p.name;
+    }
+  }
+  // The time offset the flight hides is still the first step.
+  ASSERT_FALSE(d.steps.empty());
+  EXPECT_EQ(d.steps.front().effect, "time_offset");
+}
+
 TEST(DiagnoseRules, ATrainingWindowTooShortToTellTheDragIsRefusedWithItsLength) {
   DiagnoseOptions o = options(VelocitySource::reference, 1);
   o.train = estimator::TimeWindow{0.0, 1.6};
