@@ -740,8 +740,10 @@ State measure_candidate(const StepContext& step, const Effect& effect, const Mod
   if (search.judged_by_velocity && search.options.flight_rules && effect.adds_drag() && !gives_velocity(current) &&
       gives_velocity(candidate))
     trial.velocity_test_p = velocity_gain_test(candidate.summary.velocity->validation_gain_over_zero).p_value;
-  // A gyro bias measured against the reference's attitude: whether the validation window shows it too.
-  if (search.setup.reference_gyro_bias && search.gyro_validation && effect.name() == "gyro_bias")
+  // A gyro bias measured against the reference's attitude: whether the validation window shows it too (not under
+  // --residual-only, which judges by the specific force alone, like the velocity's test).
+  if (search.options.flight_rules && search.setup.reference_gyro_bias && search.gyro_validation &&
+      effect.name() == "gyro_bias")
     trial.attitude_test_p = search.gyro_validation->p_value;
   return candidate;
 }

@@ -42,6 +42,7 @@ struct Case {
   std::string scenario = "paper";
   std::uint64_t seed = 7;
   double lowpass_hz = 0.0;  // --lowpass: compare model and measurement below this frequency only
+  bool flight_rules = true;  // false: --residual-only
 };
 
 Diagnosis diagnose(const Case& run) {
@@ -54,6 +55,7 @@ Diagnosis diagnose(const Case& run) {
   o.ignore_bands = run.ignore_bands;
   o.axes = run.axes;
   o.lowpass_hz = run.lowpass_hz;
+  o.flight_rules = run.flight_rules;
   // These flights exaggerate the sensor errors (15 % of scale or coupling) so that each stands clear of the noise
   // in a 50-s flight; the plausibility table would refuse them as no real sensor's (plausibility_test,
   // DiagnoseCommand.ACandidateBeyondThePlausibilityTableIsRefusedWithItsReason test the table itself).
@@ -174,6 +176,20 @@ TEST_P(FoundFirst, GyroBias) {
                                     [](const CandidateTrial& c) { return c.effect == "gyro_bias"; });
     ASSERT_NE(added, d.steps.front().candidates.end());
     EXPECT_NE(added->admitted_by.find("reference attitude's test"), std::string::npos) << added->admitted_by;
+  }
+}
+
+// --residual-only judges by the specific force alone: the reference attitude's test admits nothing there.
+TEST(FoundFirst, UnderResidualOnlyTheAttitudesTestIsNotRun) {
+  const Diagnosis d = diagnose({.sim_effects = {"gyro_bias=0.02"},
+                                .velocity = VelocitySource::reference,
+                                .max_steps = 1,
+                                .flight_rules = false});
+  const std::vector<CandidateTrial>& tried = d.steps.empty() ? d.last_candidates : d.steps.front().candidates;
+  ASSERT_FALSE(tried.empty());
+  for (const CandidateTrial& c : tried) {
+    EXPECT_FALSE(c.attitude_test_p.has_value()) << c.effect;
+    EXPECT_EQ(c.admitted_by.find("attitude"), std::string::npos) << c.admitted_by;
   }
 }
 
