@@ -159,13 +159,6 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
   if (setup_.axes.empty()) throw std::invalid_argument("diagnose: no axis to diagnose");
   if (setup_.velocity == VelocitySource::reference && !signals.reference)
     throw std::invalid_argument("diagnose: velocity from the reference, but the session has no reference trajectory");
-  // ModelSetup::held_at_zero: bounds that meet at zero hold it (inert).
-  const auto hold = [&](std::string_view owner, Parameter& p, std::size_t index) {
-    const std::string held = held_name(owner, p.name);
-    if (std::find(setup_.held_at_zero.begin(), setup_.held_at_zero.end(), held) == setup_.held_at_zero.end()) return;
-    p.initial = p.lower = p.upper = 0.0;
-    held_at_zero_.push_back(index);
-  };
   parameters_ = base_parameters(setup_);
   base_size_ = parameters_.size();
   std::vector<std::string> before;
@@ -174,7 +167,8 @@ Model::Model(const Signals& signals, ModelSetup setup, std::vector<const Effect*
       throw std::invalid_argument("effect " + std::string(effect->name()) + " does not apply: " + *why);
     offsets_.push_back(parameters_.size());
     for (Parameter p : effect->parameters(setup_)) {
-      hold(effect->name(), p, parameters_.size());
+      // ModelSetup::held_at_zero: bounds that meet at zero hold it (inert).
+      if (holds(setup_.held_at_zero, effect->name(), p.name)) p.initial = p.lower = p.upper = 0.0;
       parameters_.push_back(std::move(p));
     }
     before.emplace_back(effect->name());
@@ -353,7 +347,8 @@ bool Model::inert(std::size_t i) const {
 
 std::string Model::inert_reason(std::size_t i) const {
   if (!inert(i)) return "";
-  if (std::find(held_at_zero_.begin(), held_at_zero_.end(), i) != held_at_zero_.end())
+  // An effect's parameter has no bounds that meet but those ModelSetup::held_at_zero gives it.
+  if (i >= base_size_ && parameters_[i].lower == parameters_[i].upper)
     return "held at 0: its fit went past the plausibility table";
   if (parameters_[i].lower == parameters_[i].upper) return "held at the only value its bounds allow";
   return "held: nothing depends on it until a drag gives the filter something to fuse";

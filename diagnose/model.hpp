@@ -114,7 +114,6 @@ class Model {
   std::vector<const Effect*> effects_;
   std::vector<Parameter> parameters_;
   std::size_t base_size_ = 0;
-  std::vector<std::size_t> held_at_zero_;    // parameters ModelSetup::held_at_zero holds
   std::vector<std::size_t> offsets_;         // effects' first parameters, then the total
   std::optional<ModelInputs> fixed_inputs_;  // when no parameter changes stages 1-3
   std::vector<bool> input_parameter_;        // which parameters stages 1-3 depend on

@@ -689,6 +689,18 @@ std::string hold_names(const Model& model, std::span<const double> values, const
   return note + ", and the rest fitted again without it";
 }
 
+// What `params` exceed of the plausibility table beyond what `before` already does: a limit the model before exceeds
+// (its base, say) is flagged there and would otherwise block every step after it.
+std::vector<estimator::Implausibility> made_implausible(const Search& search, const estimator::FullModelParams& params,
+                                                        const State& before) {
+  const std::vector<std::string>& already = before.implausible_limits;
+  std::vector<estimator::Implausibility> out;
+  for (estimator::Implausibility& i : estimator::check_plausibility(params, search.options.limits)) {
+    if (std::find(already.begin(), already.end(), i.limit) == already.end()) out.push_back(std::move(i));
+  }
+  return out;
+}
+
 // Why a fitted candidate is refused whatever its gain (it tilts past a flight's attitude, it is implausible, or,
 // judged by the flight, the data do not determine the parameters from `offset` on), or nullopt.
 std::optional<std::string> refused_fit(const StepContext& step, const Model& model, const FitOutcome& best,
@@ -696,14 +708,8 @@ std::optional<std::string> refused_fit(const StepContext& step, const Model& mod
   const Search& search = step.search;
   if (auto why = step.judge_tilt ? unflyable(model, best.values, search.train, search.validation) : std::nullopt)
     return why;
-  // Refused for what it makes implausible; a limit the current model already exceeds (its base, say) is
-  // flagged there and would otherwise block every step.
-  const std::vector<std::string>& already = step.current.implausible_limits;
-  std::vector<estimator::Implausibility> implausible;
-  for (estimator::Implausibility& i :
-       estimator::check_plausibility(live_params(model, best.values).full, search.options.limits)) {
-    if (std::find(already.begin(), already.end(), i.limit) == already.end()) implausible.push_back(std::move(i));
-  }
+  const std::vector<estimator::Implausibility> implausible =
+      made_implausible(search, live_params(model, best.values).full, step.current);
   if (!implausible.empty()) {
     std::string why = "implausible: " + implausible.front().message;
     for (std::size_t i = 1; i < implausible.size(); ++i) why += "; " + implausible[i].message;
@@ -765,8 +771,7 @@ std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext&
     // The current model's axes held at zero stay held: the candidate is that model plus the effect (release_holds
     // frees them once a step is taken).
     ModelSetup setup = search.setup;
-    setup.held_at_zero.insert(setup.held_at_zero.end(), step.current.held_at_zero.begin(),
-                              step.current.held_at_zero.end());
+    setup.held_at_zero = step.current.held_at_zero;
     const Model model(search.signals, setup, effects);
     // Warm start: the current values, then each new effect's own start.
     std::vector<double> start = step.current.fit.values;
@@ -778,22 +783,19 @@ std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext&
     FitOutcome best = fit(model, screened_start(search, effect, effects, model, start), search.train, 50, FitStop::cost,
                           jacobian_threads);
     std::optional<std::string> why = refused_fit(step, model, best, offset);
+    // Past the table on some of the new effects' axes: fitted again with those held at zero (a value the current
+    // model has placed is not given up for a new effect's sake), and judged as that.
+    std::optional<Model> held;
     if (why && why->starts_with("implausible")) {
-      // Only the new effects' axes: a value the current model has placed is not given up for a new effect's sake.
       if (const std::vector<std::size_t> hold = axes_to_hold(search, model, best.values, offset); !hold.empty()) {
         trial.held = hold_names(model, best.values, hold, trial.held_at_zero);
         setup.held_at_zero.insert(setup.held_at_zero.end(), trial.held_at_zero.begin(), trial.held_at_zero.end());
-        const Model held(search.signals, setup, effects);
-        FitOutcome refit = fit(held, best.values, search.train, 50, FitStop::cost, jacobian_threads);
-        if (auto still = refused_fit(step, held, refit, offset)) {
-          trial.skipped = *why + "; and with " + trial.held + ": " + *still;
-          return {trial, std::nullopt};
-        }
-        State candidate = measure_candidate(step, effect, held, std::move(refit), trial);
-        candidate.held_at_zero = step.current.held_at_zero;
-        candidate.held_at_zero.insert(candidate.held_at_zero.end(), trial.held_at_zero.begin(),
-                                      trial.held_at_zero.end());
-        return {trial, std::move(candidate)};
+        held.emplace(search.signals, setup, effects);
+        best = fit(*held, best.values, search.train, 50, FitStop::cost, jacobian_threads);
+        if (auto still = refused_fit(step, *held, best, offset))
+          *why += "; and with " + trial.held + ": " + *still;
+        else
+          why.reset();
       }
     }
     if (why) {
@@ -801,8 +803,8 @@ std::pair<CandidateTrial, std::optional<State>> try_candidate(const StepContext&
       return {trial, std::nullopt};
     }
     // Two statements: `trial` is copied into the pair only once measure_candidate has filled it.
-    State candidate = measure_candidate(step, effect, model, std::move(best), trial);
-    candidate.held_at_zero = step.current.held_at_zero;
+    State candidate = measure_candidate(step, effect, held ? *held : model, std::move(best), trial);
+    candidate.held_at_zero = std::move(setup.held_at_zero);
     return {trial, std::move(candidate)};
   } catch (const std::exception& e) {
     trial.skipped = std::string("failed to fit: ") + e.what();
@@ -991,9 +993,7 @@ std::optional<State> release_holds(const Search& search, const State& held, std:
   std::vector<std::size_t> released, drag;
   for (std::size_t i = model.base_size(); i < start.size(); ++i) {
     const std::string owner = owner_of(model, i);
-    if (std::find(held.held_at_zero.begin(), held.held_at_zero.end(), held_name(owner, model.parameters()[i].name)) ==
-        held.held_at_zero.end())
-      continue;
+    if (!holds(held.held_at_zero, owner, model.parameters()[i].name)) continue;
     released.push_back(i);
     if (find_effect(owner)->adds_drag()) drag.push_back(i);
   }
@@ -1002,11 +1002,7 @@ std::optional<State> release_holds(const Search& search, const State& held, std:
   State out =
       settle(model, fit(model, start, search.train, 50, FitStop::cost, cores()), search.train, search.validation);
   judge(search, model, out);
-  for (const std::string& limit : out.implausible_limits) {
-    if (std::find(held.implausible_limits.begin(), held.implausible_limits.end(), limit) ==
-        held.implausible_limits.end())
-      return std::nullopt;
-  }
+  if (!made_implausible(search, out.params.full, held).empty()) return std::nullopt;
   const std::optional<double> before = before_step(held, search.judged_by_velocity).flight;
   const std::optional<double> after = before_step(out, search.judged_by_velocity).flight;
   if ((before && after && !flies_no_worse(*after, *before, search.options)) ||

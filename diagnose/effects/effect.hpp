@@ -13,6 +13,7 @@
 //   and measured_thrust: the base model takes T from the body-z reading instead of g.
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <functional>
 #include <limits>
 #include <optional>
@@ -64,6 +65,10 @@ struct ModelSetup {
 // How ModelSetup::held_at_zero names an effect's parameter: "linear_drag.k.y".
 inline std::string held_name(std::string_view effect, std::string_view parameter) {
   return std::string(effect) + "." + std::string(parameter);
+}
+// Whether `held` (ModelSetup::held_at_zero's names) holds that effect's parameter.
+inline bool holds(const std::vector<std::string>& held, std::string_view effect, std::string_view parameter) {
+  return std::find(held.begin(), held.end(), held_name(effect, parameter)) != held.end();
 }
 
 // The stages an effect acts in. One declaration: the model calls only these stages' hooks, and reads from it which
