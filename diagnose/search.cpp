@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <boost/math/distributions/students_t.hpp>
@@ -855,6 +856,13 @@ BeforeStep before_step(const State& current, bool judged_by_velocity) {
   return before;
 }
 
+// A test beside the specific-force residual's rules: its p-value where it ran, and what it saw.
+struct BesideTheResidual {
+  const char* name;
+  std::optional<double> p;
+  std::string seen{};
+};
+
 // Judges every candidate so far by the significance rule, at the level shared among all those tried, and names the
 // rule that rejects each one that fails.
 void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
@@ -871,31 +879,35 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
         flight_score(t.velocity_validation, t.likelihood_validation, search.judged_by_velocity);
     const bool no_worse_flown =
         !options.flight_rules || !(before.flight && score) || flies_no_worse(*score, *before.flight, options);
-    // A first drag the residual's rules do not see, which the velocity it gives shows beyond chance.
-    const bool velocity_shows_it = t.velocity_test_p && *t.velocity_test_p < level;
-    // A gyro bias the reference's attitude shows beyond chance, which the specific force hardly does.
-    const bool attitude_shows_it = t.attitude_test_p && *t.attitude_test_p < level;
-    const bool residual_shows_it = improves && passes_f_test;
-    const bool shown = residual_shows_it || velocity_shows_it || attitude_shows_it;
-    t.significant = shown && no_worse_flown;
+    // The tests beside the residual's, where they ran (one at most: the velocity's for a first drag, which the
+    // velocity it gives shows beyond chance; the reference attitude's for a gyro bias, which the specific force
+    // hardly shows): each admits what it shows.
+    std::array<BesideTheResidual, 2> beside = {
+        {{"the reference attitude's test", t.attitude_test_p}, {"the velocity's test", t.velocity_test_p}}};
     char why[400];
-    t.rejected_by.clear();
-    t.admitted_by.clear();
-    if (t.significant && !residual_shows_it && attitude_shows_it) {
+    if (t.attitude_test_p) {
       const Eigen::Vector3d& b = *search.setup.reference_gyro_bias;
       std::snprintf(why, sizeof why,
-                    "the reference attitude's test: the gyro reads (%.4f, %.4f, %.4f) rad/s beyond the reference's "
-                    "turn (training window), p = %.3g on the validation window, below %.3g (the specific-force "
-                    "residual %+.2f %%)",
-                    b.x(), b.y(), b.z(), *t.attitude_test_p, level,
-                    100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
-      t.admitted_by = why;
-    } else if (t.significant && !residual_shows_it) {
-      std::snprintf(why, sizeof why,
-                    "the velocity's test: validation velocity RMSE %.3f m/s against zero velocity's %.3f, p = %.3g, "
-                    "below %.3g (the specific-force residual %+.2f %%)",
-                    *t.velocity_validation, *before.velocity, *t.velocity_test_p, level,
-                    100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
+                    "the gyro reads (%.4f, %.4f, %.4f) rad/s beyond the reference's turn (training window), p = %.3g "
+                    "on the validation window",
+                    b.x(), b.y(), b.z(), *t.attitude_test_p);
+      beside[0].seen = why;
+    }
+    if (t.velocity_test_p) {
+      std::snprintf(why, sizeof why, "validation velocity RMSE %.3f m/s against zero velocity's %.3f, p = %.3g",
+                    *t.velocity_validation, *before.velocity, *t.velocity_test_p);
+      beside[1].seen = why;
+    }
+    const auto shows = [&](const BesideTheResidual& b) { return b.p && *b.p < level; };
+    const auto admitting = std::find_if(beside.begin(), beside.end(), shows);
+    const bool residual_shows_it = improves && passes_f_test;
+    const bool shown = residual_shows_it || admitting != beside.end();
+    t.significant = shown && no_worse_flown;
+    t.rejected_by.clear();
+    t.admitted_by.clear();
+    if (t.significant && !residual_shows_it) {
+      std::snprintf(why, sizeof why, "%s: %s, below %.3g (the specific-force residual %+.2f %%)", admitting->name,
+                    admitting->seen.c_str(), level, 100.0 * (t.rmse_validation / before.rmse_validation - 1.0));
       t.admitted_by = why;
     }
     if (t.significant) continue;
@@ -920,13 +932,9 @@ void apply_rules(const Search& search, const BeforeStep& before, Trials& out) {
                     options.significance, out.tried);
       t.rejected_by = why;
     }
-    if (t.velocity_test_p && !velocity_shows_it && !t.rejected_by.empty()) {
-      std::snprintf(why, sizeof why, "; nor the velocity's test: p = %.3g, not below %.3g", *t.velocity_test_p, level);
-      t.rejected_by += why;
-    }
-    if (t.attitude_test_p && !attitude_shows_it && !t.rejected_by.empty()) {
-      std::snprintf(why, sizeof why, "; nor the reference attitude's test: p = %.3g, not below %.3g",
-                    *t.attitude_test_p, level);
+    for (const BesideTheResidual& b : beside) {
+      if (!b.p || shows(b) || t.rejected_by.empty()) continue;
+      std::snprintf(why, sizeof why, "; nor %s: p = %.3g, not below %.3g", b.name, *b.p, level);
       t.rejected_by += why;
     }
   }
