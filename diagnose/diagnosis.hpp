@@ -158,6 +158,15 @@ struct VelocityRamp {
   double ramp_m_s() const { return per_s * span_s; }  // the line's change over the span
 };
 
+// From the IMU alone, with a reference that only scores: the least-squares scale (through zero) of the filter's
+// one-step velocity, the one the fit regressed the drag on, against the reference's, over the training window (the
+// air velocity against the ground's: alike without wind). Below 1 the prediction is shrunk, and a drag fitted on it
+// comes out larger to make up for it (docs/identification.md, "What is left, measured").
+struct PredictionScale {
+  std::string axis;  // "x" or "y"
+  double scale = 0.0;
+};
+
 // Per axis, the validation window's signals for the plots.
 struct AxisSeries {
   std::string axis;                                       // "x" or "y"
@@ -183,6 +192,7 @@ struct Diagnosis {
   bool residual_white = false;  // every axis's final validation residual passes Ljung-Box
   std::vector<Unexplained> unexplained;
   std::vector<VelocityRamp> velocity_ramps;  // from the IMU alone, when the filter runs; empty otherwise
+  std::vector<PredictionScale> prediction_scale;  // from the IMU alone with a reference; empty otherwise
   std::vector<AxisSeries> series;
   // Zero velocity's error (m/s): the floor any velocity estimate must beat. With a reference only.
   std::optional<estimator::VelocityScores> zero_velocity;

@@ -237,6 +237,8 @@ nlohmann::json report_json(const Diagnosis& d) {
                      {"std_error", number(r.std_error)},
                      {"named", r.named}});
   }
+  json scales = json::object();
+  for (const PredictionScale& s : d.prediction_scale) scales[s.axis] = number(s.scale);
   json series = json::array();
   for (const auto& s : d.series) {
     series.push_back({{"axis", s.axis},
@@ -264,6 +266,7 @@ nlohmann::json report_json(const Diagnosis& d) {
       {"residual_white", d.residual_white},
       {"unexplained", std::move(unexplained)},
       {"velocity_ramps", std::move(ramps)},
+      {"prediction_scale", std::move(scales)},
       {"series", std::move(series)}};
 }
 

@@ -1060,11 +1060,7 @@ bool take_step(const Search& search, int step_index, State& current, Diagnosis& 
 // both windows that changes it by more than that is named as what the model lacks. A drag fitted too weak to hold
 // the velocity lets it run away the same way. A flight that speeds up along a leg ramps too, by less: on real
 // flights (docs/effects.md) such ramps stay within it.
-void name_velocity_ramps(const Search& search, const State& current, Diagnosis& out) {
-  if (search.setup.velocity != VelocitySource::filter) return;
-  const Model model(search.signals, search.setup, current.effects);
-  if (!model.filter_runs()) return;  // no drag: the filter reads no velocity
-  const std::vector<Eigen::Vector3d> velocity = model.inputs(current.fit.values).velocity;
+void name_velocity_ramps(const Search& search, std::span<const Eigen::Vector3d> velocity, Diagnosis& out) {
   const std::size_t first = std::min(search.train.first, search.validation.first);
   const std::size_t end = std::min(velocity.size(), std::max(search.train.first + search.train.count,
                                                              search.validation.first + search.validation.count));
@@ -1097,6 +1093,21 @@ void name_velocity_ramps(const Search& search, const State& current, Diagnosis& 
   }
 }
 
+// With a reference to score by, the filter's one-step velocity against it on the training window (PredictionScale).
+void measure_prediction_scale(const Search& search, std::span<const Eigen::Vector3d> velocity, Diagnosis& out) {
+  if (!search.signals.reference) return;
+  const std::vector<Eigen::Vector3d>& truth = search.signals.reference->velocity_body;
+  for (std::size_t i = 0; i < search.setup.axes.size(); ++i) {
+    const int axis = search.setup.axes[i];
+    double cross = 0.0, square = 0.0;
+    for (std::size_t k = search.train.first; k < search.train.first + search.train.count && k < velocity.size(); ++k) {
+      cross += velocity[k][axis] * truth[k][axis];
+      square += truth[k][axis] * truth[k][axis];
+    }
+    if (square > 0.0 && std::isfinite(cross)) out.prediction_scale.push_back({out.axes[i], cross / square});
+  }
+}
+
 // The final model, and what structure its validation residual leaves unexplained.
 void describe_final(const Search& search, const State& current, Diagnosis& out) {
   out.final = current.summary;
@@ -1107,7 +1118,13 @@ void describe_final(const Search& search, const State& current, Diagnosis& out) 
   for (std::size_t i = 0; i < out.final_residual.size(); ++i) {
     for (Unexplained& u : unexplained_structure(out.final_residual[i], out.axes[i])) out.unexplained.push_back(u);
   }
-  name_velocity_ramps(search, current, out);
+  // From the IMU alone, the filter's one-step velocity: what the drag was fitted on (none without drag).
+  if (search.setup.velocity != VelocitySource::filter) return;
+  const Model model(search.signals, search.setup, current.effects);
+  if (!model.filter_runs()) return;
+  const std::vector<Eigen::Vector3d> velocity = model.inputs(current.fit.values).velocity;
+  name_velocity_ramps(search, velocity, out);
+  measure_prediction_scale(search, velocity, out);
 }
 
 // The plots' series: the final model's frame, with each model's prediction as measured - residual.

@@ -253,6 +253,28 @@ TEST(FromTheImuAlone, TheLeverArmDoesNotReadAsDrag) {
   EXPECT_NEAR(far_y / centre_y, 1.0, 0.08) << far_y << " against " << centre_y;
 }
 
+// The fit regresses the drag on the filter's one-step velocity. With a reference that only scores, the report says
+// how that velocity compares with the truth on the training window (Diagnosis::prediction_scale): near 1 on a
+// simulated flight, a little below (docs/identification.md, "What is left, measured"); nothing without a reference.
+TEST(FromTheImuAlone, WithAReferenceToScoreByTheReportComparesTheFiltersVelocityWithIt) {
+  const std::vector<std::string> drag = {"quadratic_drag=0.3"};
+  estimator::ImuSeries series = sim::imu_series(sim::simulate(sim::make_scenario("paper", kSeed, kDuration, drag)));
+  DiagnoseOptions o;
+  o.model = ModelKind::full;
+  o.velocity = VelocitySource::filter;
+  o.train = kTrain;
+  o.validate = kValidate;
+  o.max_steps = 1;
+  const Diagnosis scored = run_diagnosis(series, o);
+  ASSERT_EQ(scored.prediction_scale.size(), 2u);
+  for (const PredictionScale& s : scored.prediction_scale) {
+    EXPECT_GT(s.scale, 0.85) << s.axis;
+    EXPECT_LT(s.scale, 1.05) << s.axis;
+  }
+  series.reference.reset();
+  EXPECT_TRUE(run_diagnosis(series, o).prediction_scale.empty());
+}
+
 // On a simulated flight (no unmodelled acceleration) the filter's process noise settles on its floor, where it moves
 // nothing: its Jacobian column is zero there. Held on the bound for the covariance, it leaves the other parameters'
 // standard errors computable; else each candidate's would be unknown, and --judge-by-flight refuses every one of
